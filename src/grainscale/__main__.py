@@ -1,0 +1,3 @@
+from grainscale.cli import main
+
+raise SystemExit(main())
