@@ -1,0 +1,95 @@
+"""The `grainscale` command: one entry point, one sub-command per job.
+
+Each sub-command parses its arguments here and hands them to the module that does the
+work; errors in the input end the command with a clear message and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from grainscale import __version__
+from grainscale.config import ConfigError
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="grainscale",
+        description="3D hierarchical multiscale MPM x DEM simulator for granular media",
+    )
+    parser.add_argument("--version", action="version", version=f"grainscale {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    demo = sub.add_parser("demo", help="run the demonstration case and write its plots")
+    demo.add_argument("--out", type=Path, default=Path("grainscale-demo"),
+                      help="output folder (default: ./grainscale-demo)")
+
+    run = sub.add_parser("run", help="run an MPM (or MPM x DEM) case file")
+    run.add_argument("case", type=Path, help="case file (TOML)")
+    run.add_argument("--out", type=Path, required=True, help="output folder")
+    run.add_argument("--max-steps", type=_positive_int, default=None,
+                     help="stop after this many steps (a final history row is still written)")
+    run.add_argument("--checkpoint-every", type=_positive_int, default=None,
+                     help="write a checkpoint every N steps (overrides the case file)")
+    run.add_argument("--resume", action="store_true",
+                     help="continue from the latest checkpoint in --out")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    rve = sub.add_parser("rve", help="pure DEM work on one periodic RVE")
+    rsub = rve.add_subparsers(dest="rve_command", required=True)
+    gen = rsub.add_parser("generate", help="generate a packing from the [rve] table")
+    gen.add_argument("params", type=Path, help="TOML file with an [rve] table")
+    gen.add_argument("--out", type=Path, required=True,
+                     help="packing file: .txt (exchange format) or .h5 (full state)")
+    gen.add_argument("--vtk", type=Path, default=None,
+                     help="also write a ParaView snapshot (spheres + force network) here")
+    gen.add_argument("--quiet", action="store_true", help="no progress bar")
+    for name, help_ in [
+        ("triaxial", "drained triaxial compression (lateral stress servo-held)"),
+        ("isotropic", "isotropic compression to [isotropic].pressure_final"),
+        ("undrained", "constant-volume triaxial compression"),
+        ("shear", "simple shear at constant normal stress"),
+    ]:
+        p = rsub.add_parser(name, help=help_)
+        p.add_argument("params", type=Path, help="TOML file with [rve] and test tables")
+        p.add_argument("--packing", type=Path, default=None,
+                       help="start from this packing (.txt or .h5) instead of generating one")
+        p.add_argument("--out", type=Path, required=True, help="CSV file of the stress path")
+        p.add_argument("--plot", type=Path, default=None, help="PNG plot of the stress path")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "demo":
+            from grainscale.demo import run_demo
+
+            return run_demo(args.out)
+        if args.command == "run":
+            from grainscale.coupling.driver import run_case
+
+            return run_case(args.case, args.out, max_steps=args.max_steps,
+                            checkpoint_every=args.checkpoint_every, resume=args.resume,
+                            progress=not args.quiet)
+        if args.command == "rve":
+            from grainscale.dem import commands
+
+            return commands.dispatch(args)
+    except ConfigError as err:
+        print(f"grainscale: error: {err}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as err:
+        print(f"grainscale: error: file not found: {err.filename or err}", file=sys.stderr)
+        return 2
+    return 1
