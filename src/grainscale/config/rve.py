@@ -1,0 +1,129 @@
+"""Case-file tables of the DEM side: `[rve]`, `[rve.preparation]` and the element tests.
+
+```toml
+[rve]
+particles = 800
+radius_min = 3e-3
+radius_max = 7e-3
+density = 2650.0
+young_modulus = 100e6
+stiffness_ratio = 0.8      # kt/kn
+friction = 0.5
+damping = 0.2              # local non-viscous
+seed = 1
+[rve.preparation]
+pressure = 100e3
+porosity = 0.373
+[triaxial]
+confining_pressure = 100e3
+axial_strain = 0.5
+strain_rate = 0.1          # 1/s, quasi-static
+```
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from grainscale.config.base import StrictModel
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+class Preparation(StrictModel):
+    """Isotropic consolidation of a fresh packing (generation)."""
+
+    pressure: float = Field(100e3, gt=0, description="target mean stress p [Pa]")
+    porosity: float | None = Field(
+        None, gt=0.26, lt=0.50,
+        description="target porosity; a static packing of frictionless-to-frictional "
+        "spheres without adhesion lies between ~0.26 (ordered) and ~0.50 (random loose)")
+    porosity_tolerance: float = Field(0.003, gt=0, lt=0.05)
+    initial_porosity: float = Field(
+        0.70, ge=0.55, lt=0.95,
+        description="porosity of the random non-overlapping insertion (gas state)")
+    compaction_friction: float | None = Field(
+        None, ge=0, description="friction to start compaction with (default: friction)")
+    damping: float = Field(0.5, ge=0, lt=1, description="local damping while preparing")
+    max_strain_rate: float = Field(1.0, gt=0, description="servo rate limit [1/s]")
+    unbalanced: float = Field(0.01, gt=0, lt=1,
+                              description="equilibrium: unbalanced-force ratio below this")
+
+
+class Numerics(StrictModel):
+    timestep_safety: float = Field(0.3, gt=0, le=0.5,
+                                   description="dt = safety x sqrt(m_min / k_max)")
+    skin: float = Field(0.25, gt=0, le=2.0,
+                        description="Verlet skin as a fraction of radius_min")
+    servo_gain: float = Field(0.05, gt=0, le=0.5,
+                              description="fraction of the stress error corrected a step")
+
+
+class RVEParams(StrictModel):
+    particles: int = Field(800, ge=20, le=10_000_000)
+    radius_min: float = Field(3e-3, gt=0, description="smallest radius [m]")
+    radius_max: float = Field(7e-3, gt=0, description="largest radius [m]")
+    density: float = Field(2650.0, gt=0, description="grain density [kg/m^3]")
+    young_modulus: float = Field(100e6, gt=0, description="E in kn = E r* [Pa]")
+    stiffness_ratio: float = Field(0.8, gt=0, le=1.0, description="kt/kn")
+    friction: float = Field(0.5, ge=0, le=10, description="interparticle friction mu")
+    damping: float = Field(0.2, ge=0, lt=1, description="local non-viscous damping")
+    seed: int = Field(1, ge=0)
+    preparation: Preparation = Preparation()
+    numerics: Numerics = Numerics()
+
+    @model_validator(mode="after")
+    def _radii(self):
+        if self.radius_max < self.radius_min:
+            raise ValueError(
+                f"radius_max = {self.radius_max!r} is below radius_min = "
+                f"{self.radius_min!r}; valid range: radius_max >= radius_min")
+        return self
+
+
+class TriaxialTest(StrictModel):
+    """Drained triaxial compression: axial strain rate given, lateral stresses servo-held."""
+
+    confining_pressure: float = Field(100e3, gt=0, description="[Pa]")
+    axial_strain: float = Field(0.5, gt=0, lt=0.9, description="final (L0-L)/L0")
+    strain_rate: float = Field(0.1, gt=0, description="axial compression rate [1/s]")
+    axis: Literal["x", "y", "z"] = "z"
+    output_interval: float = Field(0.002, gt=0, description="axial strain between rows")
+
+
+class UndrainedTest(StrictModel):
+    """Constant-volume triaxial compression (undrained analogue)."""
+
+    axial_strain: float = Field(0.2, gt=0, lt=0.9)
+    strain_rate: float = Field(0.1, gt=0)
+    axis: Literal["x", "y", "z"] = "z"
+    output_interval: float = Field(0.002, gt=0)
+
+
+class IsotropicTest(StrictModel):
+    """Isotropic compression from the prepared state to pressure_final."""
+
+    pressure_final: float = Field(1e6, gt=0, description="[Pa]")
+    strain_rate: float = Field(0.05, gt=0, description="servo rate limit [1/s]")
+    output_interval: float = Field(0.0005, gt=0, description="volumetric strain between rows")
+
+
+class ShearTest(StrictModel):
+    """Simple shear: gamma = 2 eps_xz rate given, normal stress on z servo-held."""
+
+    normal_stress: float = Field(100e3, gt=0, description="[Pa]")
+    shear_strain: float = Field(0.5, gt=0, lt=3.0)
+    strain_rate: float = Field(0.1, gt=0, description="shear rate d gamma/dt [1/s]")
+    output_interval: float = Field(0.002, gt=0)
+
+
+class RVECase(StrictModel):
+    """A file for `grainscale rve ...`: the [rve] table and the element-test tables."""
+
+    rve: RVEParams = RVEParams()
+    triaxial: TriaxialTest = TriaxialTest()
+    undrained: UndrainedTest = UndrainedTest()
+    isotropic: IsotropicTest = IsotropicTest()
+    shear: ShearTest = ShearTest()

@@ -1,0 +1,165 @@
+"""Driving the batched DEM kernel from Python: parameters, cell control, time step.
+
+`advance` is the one entry point for every use of the DEM (element tests, generation,
+the MPM material): it runs the compiled kernel, regrows neighbour capacity when a list
+overflows and retries, and turns kernel status codes into clear errors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from grainscale.dem.kernel import NOT_FINITE, advance_batch, contact_pass
+from grainscale.dem.neighbours import OK, OVERFLOW, TOO_THIN, build
+from grainscale.dem.state import RVEBatch, grow_capacity
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Linear contact law and damping (seed Eq. 7-10)."""
+
+    young: float            # E [Pa]; kn = E r*
+    stiffness_ratio: float  # kt / kn
+    friction: float         # mu = tan(phi_interparticle)
+    damping: float = 0.0    # Cundall local non-viscous damping coefficient [0, 1)
+    skin: float = 1e-3      # Verlet skin [m]
+
+
+@dataclass
+class Control:
+    """How the cell moves during a call: fixed hdot plus a velocity gradient with servos.
+
+    hdot = hdot_fixed + L h, where L = l_ctrl except on the components with
+    servo_mask = 1 (upper triangle read; a shear servo moves L_ab = L_ba), which follow a
+    proportional servo to servo_target (Cauchy, tension positive, Pa): per step the
+    strain change is servo_gain x (stress error) / (affine stiffness), clipped to
+    max_rate [1/s].
+    """
+
+    hdot_fixed: np.ndarray    # (R,3,3) [m/s]
+    l_ctrl: np.ndarray        # (R,3,3) [1/s]
+    servo_mask: np.ndarray    # (R,3,3) int32
+    servo_target: np.ndarray  # (R,3,3) [Pa]
+    servo_gain: float = 0.05
+    max_rate: np.ndarray | None = None  # (R,) [1/s]
+
+
+def rate_control(n_rve: int, l_ctrl=None, servo: dict | None = None,
+                 max_rate: float = 1.0, gain: float = 0.05) -> Control:
+    """Velocity-gradient control with servos {component: target stress [Pa]}.
+
+    A component is an axis (0, 1, 2) for a normal stress or a pair (a, b) for a shear
+    stress; targets are Cauchy, tension positive.
+    """
+    lc = np.zeros((n_rve, 3, 3)) if l_ctrl is None else np.broadcast_to(
+        np.asarray(l_ctrl, float), (n_rve, 3, 3)).copy()
+    mask = np.zeros((n_rve, 3, 3), np.int32)
+    target = np.zeros((n_rve, 3, 3))
+    for comp, value in (servo or {}).items():
+        a, b = sorted((comp, comp) if isinstance(comp, int) else comp)
+        mask[:, a, b] = 1
+        target[:, a, b] = value
+        lc[:, a, b] = lc[:, b, a] = 0.0
+    return Control(np.zeros((n_rve, 3, 3)), lc, mask, target, gain,
+                   np.full(n_rve, float(max_rate)))
+
+
+def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps: int, dt: float) -> Control:
+    """Deform each cell by h <- (I + dH) h, spread evenly over nsteps steps of dt.
+
+    h moves linearly, h_k = h_0 + (k/n) dH h_0, so after n steps it is exactly
+    (I + dH) h_0; dH (R,3,3) is the displacement-gradient increment, dH[a,b] = du_a/dx_b.
+    """
+    r = batch.n_rve
+    dH = np.broadcast_to(np.asarray(dH, float), (r, 3, 3))
+    hdot = np.einsum("rab,rbc->rac", dH, batch.h) / (nsteps * dt)
+    return Control(hdot, np.zeros((r, 3, 3)), np.zeros((r, 3, 3), np.int32),
+                   np.zeros((r, 3, 3)), 0.0, np.zeros(r))
+
+
+def critical_dt(batch: RVEBatch, params: ContactParams, safety: float = 0.3) -> float:
+    """safety x sqrt(m_min / k_max), k_max = E r_max (the stiffest possible contact) [s]."""
+    return safety * float(np.sqrt(batch.mass.min() / (params.young * batch.radius.max())))
+
+
+def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
+            control: Control) -> RVEBatch:
+    """Advance every RVE by nsteps (int or (R,) array) steps of dt, in place."""
+    remaining = np.broadcast_to(np.asarray(nsteps, np.int64), (batch.n_rve,)).copy()
+    status = np.zeros(batch.n_rve, np.int64)
+    out = np.zeros((batch.n_rve, 5))
+    max_rate = control.max_rate if control.max_rate is not None else np.zeros(batch.n_rve)
+    while remaining.max() > 0:
+        advance_batch(remaining, dt, params.young, params.stiffness_ratio, params.friction,
+                      params.damping, params.skin, batch.h, batch.s, batch.v, batch.w,
+                      batch.rot, batch.radius, batch.mass, batch.inertia, batch.L,
+                      batch.stress, batch.stiffness, batch.nbr_j, batch.nbr_shift,
+                      batch.nbr_count, batch.ft, batch.s_ref, batch.h_ref,
+                      batch.need_rebuild, batch.force, batch.torque, batch.x, batch.link,
+                      batch.wrapv, control.hdot_fixed, control.l_ctrl, control.servo_mask,
+                      control.servo_target, control.servo_gain, max_rate, status, out)
+        remaining -= out[:, 4].astype(np.int64)
+        batch.ncontact[:] = out[:, 0]
+        batch.unbalanced[:] = out[:, 1]
+        batch.kinetic[:] = out[:, 2]
+        _check(batch, status, out)
+    return batch
+
+
+def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
+    if np.any(status == OVERFLOW):
+        need = int(out[status == OVERFLOW, 3].max())
+        grow_capacity(batch, max(need + 4, int(1.5 * batch.capacity)))
+    if np.any(status == TOO_THIN):
+        r = int(np.argmax(status == TOO_THIN))
+        raise RuntimeError(
+            f"RVE {r}: periodic cell too thin for its spheres (a perpendicular width is "
+            f"below 2 x (2 r_max + skin)); it is too small or too distorted for this "
+            f"deformation; use more particles")
+    if np.any(status == NOT_FINITE):
+        r = int(np.argmax(status == NOT_FINITE))
+        raise FloatingPointError(
+            f"RVE {r}: motion became non-finite (time step too large for the stiffness?)")
+
+
+@njit(cache=True, parallel=True)
+def _refresh(young, kt_ratio, friction, skin, h, s, v, w, radius, L, stress, stiffness,
+             nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild, force, torque, x,
+             link, wrapv, status, out):
+    for r in prange(s.shape[0]):
+        status[r] = OK
+        if need_rebuild[r] != 0:
+            st, needed = build(h[r], s[r], radius[r], nbr_j[r], nbr_shift[r],
+                               nbr_count[r], ft[r], s_ref[r], h_ref[r], link[r], wrapv[r],
+                               x[r], skin)
+            out[r, 3] = needed
+            status[r] = st
+            if st != OK:
+                continue
+            need_rebuild[r] = 0
+        table = np.empty((27, 3))
+        nc, _ = contact_pass(0.0, young, kt_ratio, friction, h[r], s[r], v[r], w[r],
+                             radius[r], L[r], nbr_j[r], nbr_shift[r], nbr_count[r], ft[r],
+                             force[r], torque[r], x[r], table, stress[r], stiffness[r],
+                             True)
+        out[r, 0] = nc
+
+
+def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
+    """Recompute forces, stress and stiffness of the current configuration (no motion)."""
+    status = np.zeros(batch.n_rve, np.int64)
+    out = np.zeros((batch.n_rve, 5))
+    while True:
+        _refresh(params.young, params.stiffness_ratio, params.friction, params.skin,
+                 batch.h, batch.s, batch.v, batch.w, batch.radius, batch.L, batch.stress,
+                 batch.stiffness, batch.nbr_j, batch.nbr_shift, batch.nbr_count, batch.ft,
+                 batch.s_ref, batch.h_ref, batch.need_rebuild, batch.force, batch.torque,
+                 batch.x, batch.link, batch.wrapv, status, out)
+        _check(batch, status, out)
+        if not np.any(status == OVERFLOW):
+            break
+    batch.ncontact[:] = out[:, 0]
+    return batch

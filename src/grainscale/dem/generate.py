@@ -1,0 +1,164 @@
+"""Packing generation: random insertion, servo consolidation, friction control of porosity.
+
+1. Radii uniform in [r_min, r_max]; spheres inserted at random without overlap (largest
+   first) in a cubic periodic cell at a loose `initial_porosity`.
+2. Servo-controlled isotropic compression to the target pressure with a compaction
+   friction (default: the real friction) until equilibrium.
+3. If a target porosity is given and the packing is looser, the compaction friction is
+   lowered step by step, re-equilibrating at the target pressure each time: lower
+   friction lets the packing densify. A step that overshoots the target is undone from a
+   snapshot and retried with a smaller friction decrement, so porosity approaches the
+   target from above.
+4. The real friction is restored and the packing relaxed at the target pressure until
+   the unbalanced-force ratio is below `preparation.unbalanced`.
+
+Deterministic for a seed (one RNG, fixed operation order). If the target porosity
+cannot be reached, a GenerationError says which porosity range was reachable.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grainscale.config.rve import RVEParams
+from grainscale.dem import engine, homogenise
+from grainscale.dem.state import RVEBatch, from_packing
+
+
+class GenerationError(RuntimeError):
+    """The requested packing state could not be reached."""
+
+
+def contact_params(params: RVEParams, friction: float | None = None,
+                   damping: float | None = None) -> engine.ContactParams:
+    """The kernel's contact parameters from an [rve] table."""
+    return engine.ContactParams(
+        young=params.young_modulus, stiffness_ratio=params.stiffness_ratio,
+        friction=params.friction if friction is None else friction,
+        damping=params.damping if damping is None else damping,
+        skin=params.numerics.skin * params.radius_min)
+
+
+def insert_random(n: int, rmin: float, rmax: float, porosity: float,
+                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Non-overlapping random spheres in a cubic periodic cell at the given porosity.
+
+    Returns (h, centres, radii). Radii are uniform in [rmin, rmax].
+    """
+    radii = rng.uniform(rmin, rmax, n)
+    solid = (4.0 / 3.0) * np.pi * np.sum(radii**3)
+    side = (solid / (1.0 - porosity)) ** (1.0 / 3.0)
+    if side < 4.0 * (2.0 * rmax):
+        raise GenerationError(
+            f"rve.particles = {n} is too few for radius_max = {rmax}: the cell side "
+            f"{side:.4g} m would be below 8 r_max; use more particles")
+    order = np.argsort(-radii, kind="stable")
+    pos = np.empty((n, 3))
+    placed = 0
+    for idx in order:
+        r = radii[idx]
+        for _ in range(100_000):
+            trial = rng.uniform(0.0, side, 3)
+            if placed:
+                d = pos[order[:placed]] - trial
+                d -= side * np.round(d / side)
+                gap = np.einsum("ij,ij->i", d, d) - (radii[order[:placed]] + r) ** 2
+                if gap.min() <= 0.0:
+                    continue
+            pos[idx] = trial
+            placed += 1
+            break
+        else:
+            raise GenerationError(
+                f"could not insert sphere {placed + 1} of {n} without overlap at "
+                f"rve.preparation.initial_porosity = {porosity}; raise it")
+    return np.eye(3) * side, pos, radii
+
+
+def consolidate(batch: RVEBatch, cp: engine.ContactParams, pressure: float, dt: float,
+                max_rate: float, gain: float, unbalanced: float,
+                max_steps: int = 3_000_000, chunk: int = 500, tol: float = 0.01) -> int:
+    """Servo all three normal stresses to -pressure until static; returns steps taken.
+
+    Shear stresses are servoed to zero (the cell may shear), so the state is isotropic.
+    Static: every stress component within `tol` x pressure of its target and the
+    unbalanced-force ratio below `unbalanced`, for two consecutive checks.
+    """
+    servo = {0: -pressure, 1: -pressure, 2: -pressure, (0, 1): 0.0, (0, 2): 0.0, (1, 2): 0.0}
+    ctrl = engine.rate_control(batch.n_rve, servo=servo, max_rate=max_rate, gain=gain)
+    steps = 0
+    calm = 0
+    while steps < max_steps:
+        engine.advance(batch, chunk, dt, cp, ctrl)
+        steps += chunk
+        err = np.abs(batch.stress + pressure * np.eye(3)) / pressure
+        ok = np.all(err < tol) and np.all(batch.unbalanced < unbalanced)
+        calm = calm + 1 if ok else 0
+        if calm >= 2:
+            return steps
+    raise GenerationError(
+        f"no static state at p = {pressure:g} Pa after {max_steps} steps (p = "
+        f"{homogenise.mean_stress(batch.stress)[0]:.4g} Pa, unbalanced = "
+        f"{batch.unbalanced[0]:.3g}); check rve.preparation.max_strain_rate")
+
+
+def generate(params: RVEParams, progress=None) -> RVEBatch:
+    """A consolidated packing (batch of one RVE) as the [rve] table asks.
+
+    `progress(text)` is called with a status line after each stage if given.
+    """
+    prep = params.preparation
+    say = progress or (lambda text: None)
+    rng = np.random.default_rng(params.seed)
+    h, pos, radii = insert_random(params.particles, params.radius_min, params.radius_max,
+                                  prep.initial_porosity, rng)
+    batch = from_packing(h, pos, radii, params.density)
+    cp = contact_params(params, damping=prep.damping)
+    dt = engine.critical_dt(batch, cp, params.numerics.timestep_safety)
+    mu = params.friction if prep.compaction_friction is None else prep.compaction_friction
+
+    def settle(friction: float) -> float:
+        consolidate(batch, contact_params(params, friction, prep.damping), prep.pressure, dt,
+                    prep.max_strain_rate, params.numerics.servo_gain, prep.unbalanced)
+        n = float(batch.porosity()[0])
+        say(f"compaction friction {friction:.4f}: porosity {n:.4f} at "
+            f"p = {homogenise.mean_stress(batch.stress)[0]:.4g} Pa")
+        return n
+
+    n = settle(mu)
+    target, tol = prep.porosity, prep.porosity_tolerance
+    if target is not None:
+        if n < target - tol:
+            raise GenerationError(
+                f"rve.preparation.porosity = {target} is looser than what compaction "
+                f"reaches: compaction friction {mu} gives porosity {n:.4f} at p = "
+                f"{prep.pressure:g} Pa; reachable here: porosity <= {n:.4f} (raise "
+                f"rve.preparation.compaction_friction for looser packings)")
+        factor = 0.7
+        while n > target + 0.5 * tol:
+            if mu == 0.0:
+                raise GenerationError(
+                    f"rve.preparation.porosity = {target} is denser than what frictionless "
+                    f"compaction reaches: porosity {n:.4f} at p = {prep.pressure:g} Pa; "
+                    f"reachable here: porosity >= {n:.4f}")
+            snapshot = batch.copy()
+            trial = mu * factor if mu * factor > 1e-3 else 0.0
+            n_trial = settle(trial)
+            if n_trial < target - tol:  # overshoot: undo, take a smaller step
+                batch = snapshot
+                factor = factor ** 0.5
+                if factor > 0.999:
+                    raise GenerationError(
+                        f"porosity jumps past rve.preparation.porosity = {target} "
+                        f"± {tol}: {n:.4f} -> {n_trial:.4f}; widen porosity_tolerance")
+                continue
+            mu, n = trial, n_trial
+    # real friction restored, relaxed to equilibrium
+    n = settle(params.friction)
+    if target is not None and abs(n - target) > tol:
+        raise GenerationError(
+            f"restoring friction {params.friction} moved the porosity to {n:.4f}, outside "
+            f"rve.preparation.porosity = {target} ± {tol}")
+    batch.h0[:] = batch.h
+    batch.rot[:] = 0.0
+    return batch

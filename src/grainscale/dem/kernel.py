@@ -1,0 +1,382 @@
+"""The batched DEM step: contact forces, Love-Weber stress, integration, cell motion.
+
+One compiled call advances R RVEs by their own number of steps, `prange` over RVEs; the
+work of one RVE never touches another's arrays, so an RVE alone and the same RVE inside
+a batch follow the same arithmetic. Nothing is allocated per step.
+
+Per step of one RVE (dt fixed):
+1. cell control: L = L_ctrl, with each servo-controlled component replaced by
+   L_kk = g (sigma*_kk - sigma_kk) / (C_kk dt) on the diagonal and, for a shear pair,
+   L_ab = L_ba = g (sigma*_ab - sym sigma_ab) / (2 C_ab dt) (clipped to +-max_rate),
+   where C_ab = (1/V) sum kn |d|^2 n_a^2 n_b^2 is the affine stiffness of the last step;
+   hdot = hdot_fixed + L h; mean-field velocity gradient L = hdot h^-1.
+2. contacts over the half list (seed Eq. 7-10): kn = E r*, r* = 2 ri rj/(ri + rj),
+   kt = ratio kn; f_n = kn delta; tangential force history rotated with the contact
+   frame, incremented by kt v_t dt and capped at mu f_n. The relative velocity includes
+   the mean-field term L d across periodic images.
+3. Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
+   first particle and d = x_j - x_i, so compression is negative (tension positive).
+4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion:
+   v += dt (F - alpha |F| sign v)/m, same for rotation; s += h_new^-1 v dt;
+   accumulated rotation += |w| dt.
+5. h += dt hdot; flag a list rebuild when 2 max|u'| + |h h_ref^-1 - I|_F cutoff >= skin
+   (u' the fluctuating displacement since the build): no pair can then have entered the
+   cutoff unseen.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from grainscale.dem.neighbours import OK, build, image_table
+
+# status codes beyond the neighbour ones
+NOT_FINITE = 3
+
+
+@njit(cache=True, inline="always")
+def _inv3(a, out):
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    inv = 1.0 / det
+    out[0, 0] = c00 * inv
+    out[1, 0] = c01 * inv
+    out[2, 0] = c02 * inv
+    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * inv
+    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * inv
+    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * inv
+    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * inv
+    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * inv
+    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * inv
+    return det
+
+
+@njit(cache=True, inline="always")
+def _sgn(a):
+    """1 where a != 0, else 0: damping acts only on moving degrees of freedom."""
+    return 1.0 if a != 0.0 else 0.0
+
+
+@njit(cache=True, fastmath=True)
+def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nbr_shift,
+                 nbr_count, ft, force, torque, x, table, stress_out, stiff_out, homogenise):
+    """Contact forces and torques of one RVE at its current configuration.
+
+    Updates the tangential history by dt (dt = 0 only re-projects it), fills force and
+    torque (N) and, if `homogenise`, stress_out (3x3, Pa) and stiff_out (3x3 affine
+    stiffness C_ab, Pa); skipping them saves a third of the work per contact. Returns
+    (number of contacts, sum of normal contact forces [N]).
+    """
+    n = s.shape[0]
+    for i in range(n):
+        for d in range(3):
+            x[i, d] = h[d, 0] * s[i, 0] + h[d, 1] * s[i, 1] + h[d, 2] * s[i, 2]
+            force[i, d] = 0.0
+            torque[i, d] = 0.0
+    image_table(h, table)
+    # mean-field spin (axial vector of the skew part of L) turns the contact frames
+    sp0 = 0.5 * (L[2, 1] - L[1, 2])
+    sp1 = 0.5 * (L[0, 2] - L[2, 0])
+    sp2 = 0.5 * (L[1, 0] - L[0, 1])
+    sxx = sxy = sxz = syx = syy = syz = szx = szy = szz = 0.0
+    c00 = c11 = c22 = c01 = c02 = c12 = 0.0
+    ncontact = 0
+    fsum = 0.0
+    for i in range(n):
+        xi0 = x[i, 0]
+        xi1 = x[i, 1]
+        xi2 = x[i, 2]
+        ri = radius[i]
+        fi0 = fi1 = fi2 = 0.0
+        ti0 = ti1 = ti2 = 0.0
+        for k in range(nbr_count[i]):
+            j = nbr_j[i, k]
+            t = nbr_shift[i, k]
+            d0 = x[j, 0] - xi0 + table[t, 0]
+            d1 = x[j, 1] - xi1 + table[t, 1]
+            d2 = x[j, 2] - xi2 + table[t, 2]
+            rj = radius[j]
+            rr = ri + rj
+            dist2 = d0 * d0 + d1 * d1 + d2 * d2
+            if dist2 >= rr * rr:
+                ft[i, k, 0] = 0.0
+                ft[i, k, 1] = 0.0
+                ft[i, k, 2] = 0.0
+                continue
+            dist = math.sqrt(dist2)
+            inv = 1.0 / dist
+            n0 = d0 * inv
+            n1 = d1 * inv
+            n2 = d2 * inv
+            kn = young * 2.0 * ri * rj / rr
+            fn = kn * (rr - dist)
+            # relative velocity of j's surface w.r.t. i's at the contact point
+            wa0 = ri * w[i, 0] + rj * w[j, 0]
+            wa1 = ri * w[i, 1] + rj * w[j, 1]
+            wa2 = ri * w[i, 2] + rj * w[j, 2]
+            vr0 = v[j, 0] - v[i, 0] + L[0, 0] * d0 + L[0, 1] * d1 + L[0, 2] * d2 \
+                - (wa1 * n2 - wa2 * n1)
+            vr1 = v[j, 1] - v[i, 1] + L[1, 0] * d0 + L[1, 1] * d1 + L[1, 2] * d2 \
+                - (wa2 * n0 - wa0 * n2)
+            vr2 = v[j, 2] - v[i, 2] + L[2, 0] * d0 + L[2, 1] * d1 + L[2, 2] * d2 \
+                - (wa0 * n1 - wa1 * n0)
+            vn = vr0 * n0 + vr1 * n1 + vr2 * n2
+            # history: turn with the contact frame (mean-field spin plus the particles'
+            # twist about n, to first order in dt), then drop its normal component
+            f0 = ft[i, k, 0]
+            f1 = ft[i, k, 1]
+            f2 = ft[i, k, 2]
+            tw = 0.5 * ((w[i, 0] + w[j, 0]) * n0 + (w[i, 1] + w[j, 1]) * n1
+                        + (w[i, 2] + w[j, 2]) * n2)
+            o0 = (sp0 + tw * n0) * dt
+            o1 = (sp1 + tw * n1) * dt
+            o2 = (sp2 + tw * n2) * dt
+            g0 = f0 + o1 * f2 - o2 * f1
+            g1 = f1 + o2 * f0 - o0 * f2
+            g2 = f2 + o0 * f1 - o1 * f0
+            gn = g0 * n0 + g1 * n1 + g2 * n2
+            f0 = g0 - gn * n0
+            f1 = g1 - gn * n1
+            f2 = g2 - gn * n2
+            kt = kt_ratio * kn
+            f0 += kt * (vr0 - vn * n0) * dt
+            f1 += kt * (vr1 - vn * n1) * dt
+            f2 += kt * (vr2 - vn * n2) * dt
+            cap = friction * fn
+            fm2 = f0 * f0 + f1 * f1 + f2 * f2
+            if fm2 > cap * cap:
+                sc = cap / math.sqrt(fm2)
+                f0 *= sc
+                f1 *= sc
+                f2 *= sc
+            ft[i, k, 0] = f0
+            ft[i, k, 1] = f1
+            ft[i, k, 2] = f2
+            # total force on i
+            F0 = f0 - fn * n0
+            F1 = f1 - fn * n1
+            F2 = f2 - fn * n2
+            fi0 += F0
+            fi1 += F1
+            fi2 += F2
+            force[j, 0] -= F0
+            force[j, 1] -= F1
+            force[j, 2] -= F2
+            # torques: only the tangential part has a lever arm (ri n on i, rj n on j)
+            tq0 = n1 * f2 - n2 * f1
+            tq1 = n2 * f0 - n0 * f2
+            tq2 = n0 * f1 - n1 * f0
+            ti0 += ri * tq0
+            ti1 += ri * tq1
+            ti2 += ri * tq2
+            torque[j, 0] += rj * tq0
+            torque[j, 1] += rj * tq1
+            torque[j, 2] += rj * tq2
+            ncontact += 1
+            fsum += fn
+            if not homogenise:
+                continue
+            sxx += d0 * F0
+            sxy += d0 * F1
+            sxz += d0 * F2
+            syx += d1 * F0
+            syy += d1 * F1
+            syz += d1 * F2
+            szx += d2 * F0
+            szy += d2 * F1
+            szz += d2 * F2
+            q0 = dist * n0 * n0
+            q1 = dist * n1 * n1
+            q2 = dist * n2 * n2
+            c00 += kn * q0 * q0
+            c11 += kn * q1 * q1
+            c22 += kn * q2 * q2
+            c01 += kn * q0 * q1
+            c02 += kn * q0 * q2
+            c12 += kn * q1 * q2
+        force[i, 0] += fi0
+        force[i, 1] += fi1
+        force[i, 2] += fi2
+        torque[i, 0] += ti0
+        torque[i, 1] += ti1
+        torque[i, 2] += ti2
+    if not homogenise:
+        return ncontact, fsum
+    vol = (h[0, 0] * (h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1])
+           - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
+           + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
+    iv = 1.0 / vol
+    stress_out[0, 0] = sxx * iv
+    stress_out[0, 1] = sxy * iv
+    stress_out[0, 2] = sxz * iv
+    stress_out[1, 0] = syx * iv
+    stress_out[1, 1] = syy * iv
+    stress_out[1, 2] = syz * iv
+    stress_out[2, 0] = szx * iv
+    stress_out[2, 1] = szy * iv
+    stress_out[2, 2] = szz * iv
+    stiff_out[0, 0] = c00 * iv
+    stiff_out[1, 1] = c11 * iv
+    stiff_out[2, 2] = c22 * iv
+    stiff_out[0, 1] = stiff_out[1, 0] = c01 * iv
+    stiff_out[0, 2] = stiff_out[2, 0] = c02 * iv
+    stiff_out[1, 2] = stiff_out[2, 1] = c12 * iv
+    return ncontact, fsum
+
+
+@njit(cache=True, fastmath=True)
+def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
+                h, s, v, w, rot, radius, mass, inertia, L, stress, stiffness,
+                nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
+                force, torque, x, link, wrapv,
+                hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain, max_rate, out):
+    """Advance one RVE by `nsteps` steps of dt [s]; see the module docstring.
+
+    `out` (5,) receives: contacts, unbalanced-force ratio, kinetic energy [J], the row
+    length a list build asked for, steps done. Returns a status code (0 = ok).
+    """
+    n = s.shape[0]
+    table = np.empty((27, 3))
+    hdot = np.empty((3, 3))
+    hinv = np.empty((3, 3))
+    lc = np.empty((3, 3))
+    rmax = 0.0
+    for i in range(n):
+        rmax = max(rmax, radius[i])
+    cutoff = 2.0 * rmax + skin
+    status = OK
+    done = 0
+    ncontact = 0
+    fsum = 0.0
+    servo_on = False
+    for a in range(3):
+        for b in range(3):
+            if servo_mask[a, b] != 0:
+                servo_on = True
+    for _step in range(nsteps):
+        if need_rebuild[0] != 0:
+            st, needed = build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref,
+                               h_ref, link, wrapv, x, skin)
+            out[3] = needed
+            if st != OK:
+                status = st
+                break
+            need_rebuild[0] = 0
+        # 1. cell control
+        for a in range(3):
+            for b in range(3):
+                lc[a, b] = l_ctrl[a, b]
+        for a in range(3):
+            for b in range(a, 3):
+                if servo_mask[a, b] == 0:
+                    continue
+                err = servo_target[a, b] - 0.5 * (stress[a, b] + stress[b, a])
+                c = stiffness[a, b] if a == b else 2.0 * stiffness[a, b]
+                if c > 0.0:
+                    rate = servo_gain * err / (c * dt)
+                else:  # no contacts yet: move at the largest rate toward the target
+                    rate = max_rate if err > 0.0 else -max_rate
+                rate = min(max(rate, -max_rate), max_rate)
+                lc[a, b] = rate
+                lc[b, a] = rate
+        for a in range(3):
+            for b in range(3):
+                hdot[a, b] = hdot_fixed[a, b] + lc[a, 0] * h[0, b] + lc[a, 1] * h[1, b] \
+                    + lc[a, 2] * h[2, b]
+        _inv3(h, hinv)
+        for a in range(3):
+            for b in range(3):
+                L[a, b] = hdot[a, 0] * hinv[0, b] + hdot[a, 1] * hinv[1, b] \
+                    + hdot[a, 2] * hinv[2, b]
+        # 2-3. contacts, and stress where a servo or the caller needs it
+        last = _step == nsteps - 1
+        ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius,
+                                      L, nbr_j, nbr_shift, nbr_count, ft, force, torque, x,
+                                      table, stress, stiffness, servo_on or last)
+        # 5 (first half). new cell, its inverse for the position update
+        for a in range(3):
+            for b in range(3):
+                h[a, b] += dt * hdot[a, b]
+        _inv3(h, hinv)
+        # 4. integration (damping opposes the fluctuating velocity, seed's YADE style)
+        umax2 = 0.0
+        fres = 0.0
+        ekin = 0.0
+        for i in range(n):
+            im = dt / mass[i]
+            ii = dt / inertia[i]
+            f0 = force[i, 0]
+            f1 = force[i, 1]
+            f2 = force[i, 2]
+            t0 = torque[i, 0]
+            t1 = torque[i, 1]
+            t2 = torque[i, 2]
+            if last:
+                fres += math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+            v[i, 0] += im * (f0 - damping * math.copysign(f0, v[i, 0]) * _sgn(v[i, 0]))
+            v[i, 1] += im * (f1 - damping * math.copysign(f1, v[i, 1]) * _sgn(v[i, 1]))
+            v[i, 2] += im * (f2 - damping * math.copysign(f2, v[i, 2]) * _sgn(v[i, 2]))
+            w[i, 0] += ii * (t0 - damping * math.copysign(t0, w[i, 0]) * _sgn(w[i, 0]))
+            w[i, 1] += ii * (t1 - damping * math.copysign(t1, w[i, 1]) * _sgn(w[i, 1]))
+            w[i, 2] += ii * (t2 - damping * math.copysign(t2, w[i, 2]) * _sgn(w[i, 2]))
+            v0 = v[i, 0] * dt
+            v1 = v[i, 1] * dt
+            v2 = v[i, 2] * dt
+            s[i, 0] += hinv[0, 0] * v0 + hinv[0, 1] * v1 + hinv[0, 2] * v2
+            s[i, 1] += hinv[1, 0] * v0 + hinv[1, 1] * v1 + hinv[1, 2] * v2
+            s[i, 2] += hinv[2, 0] * v0 + hinv[2, 1] * v1 + hinv[2, 2] * v2
+            w2 = w[i, 0] * w[i, 0] + w[i, 1] * w[i, 1] + w[i, 2] * w[i, 2]
+            rot[i] += math.sqrt(w2) * dt
+            if last:
+                vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+                ekin += 0.5 * (mass[i] * vv + inertia[i] * w2)
+            e0 = s[i, 0] - s_ref[i, 0]
+            e1 = s[i, 1] - s_ref[i, 1]
+            e2 = s[i, 2] - s_ref[i, 2]
+            u0 = h[0, 0] * e0 + h[0, 1] * e1 + h[0, 2] * e2
+            u1 = h[1, 0] * e0 + h[1, 1] * e1 + h[1, 2] * e2
+            u2 = h[2, 0] * e0 + h[2, 1] * e1 + h[2, 2] * e2
+            umax2 = max(umax2, u0 * u0 + u1 * u1 + u2 * u2)
+        # 5 (second half). is the list still complete?
+        _inv3(h_ref, hinv)
+        e2sum = 0.0
+        for a in range(3):
+            for b in range(3):
+                m = h[a, 0] * hinv[0, b] + h[a, 1] * hinv[1, b] + h[a, 2] * hinv[2, b]
+                if a == b:
+                    m -= 1.0
+                e2sum += m * m
+        if 2.0 * math.sqrt(umax2) + math.sqrt(e2sum) * cutoff >= skin:
+            need_rebuild[0] = 1
+        done += 1
+        if last:
+            if not math.isfinite(ekin):
+                status = NOT_FINITE
+            out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
+            out[2] = ekin
+    out[0] = ncontact
+    out[4] = done
+    return status
+
+
+@njit(cache=True, parallel=True)
+def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
+                  h, s, v, w, rot, radius, mass, inertia, L, stress, stiffness,
+                  nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
+                  force, torque, x, link, wrapv,
+                  hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain, max_rate,
+                  status, out):
+    """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs."""
+    for r in prange(s.shape[0]):
+        status[r] = advance_rve(
+            nsteps[r], dt, young, kt_ratio, friction, damping, skin,
+            h[r], s[r], v[r], w[r], rot[r], radius[r], mass[r], inertia[r], L[r],
+            stress[r], stiffness[r], nbr_j[r], nbr_shift[r], nbr_count[r], ft[r],
+            s_ref[r], h_ref[r], need_rebuild[r:r + 1], force[r], torque[r], x[r],
+            link[r], wrapv[r], hdot_fixed[r], l_ctrl[r], servo_mask[r], servo_target[r],
+            servo_gain, max_rate[r], out[r])

@@ -1,0 +1,160 @@
+"""State of a batch of periodic RVEs in structure-of-arrays form.
+
+A batch holds R RVEs of N spheres each; every array has the RVE index first, so one RVE
+alone and the same RVE inside a batch are the same data. Positions are fractional
+coordinates `s` (see cell.py); velocities `v` are the *fluctuating* part (the mean-field
+velocity L x is added where a relative velocity needs it).
+
+Neighbour lists are half lists with a fixed capacity K per particle: row i holds the
+particles j > i within the cutoff 2 r_max + skin at the last build, each with its image
+shift encoded as one byte (27 values, 13 = no shift) and its tangential contact force
+history `ft` (force on i, N). Capacity is regrown outside compiled code on overflow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+# per-RVE arrays that define the physical state (saved in checkpoints and .h5 files)
+STATE_FIELDS = ("h", "s", "v", "w", "rot", "radius", "mass", "inertia", "L", "stress",
+                "stiffness", "h0", "nbr_j", "nbr_shift", "nbr_count", "ft", "s_ref",
+                "h_ref", "need_rebuild")
+
+
+@dataclass
+class RVEBatch:
+    """Arrays of R RVEs x N spheres; K is the neighbour capacity per sphere."""
+
+    h: np.ndarray            # (R,3,3) cell matrix, edge vectors as columns [m]
+    s: np.ndarray            # (R,N,3) fractional positions (unwrapped between list builds)
+    v: np.ndarray            # (R,N,3) fluctuating velocity [m/s]
+    w: np.ndarray            # (R,N,3) angular velocity [rad/s]
+    rot: np.ndarray          # (R,N) accumulated rotation angle, integral of |w| dt [rad]
+    radius: np.ndarray       # (R,N) [m]
+    mass: np.ndarray         # (R,N) [kg]
+    inertia: np.ndarray      # (R,N) moment of inertia 2/5 m r^2 [kg m^2]
+    L: np.ndarray            # (R,3,3) mean-field velocity gradient of the last step [1/s]
+    stress: np.ndarray       # (R,3,3) Love-Weber Cauchy stress, tension positive [Pa]
+    stiffness: np.ndarray    # (R,3,3) affine stiffness C_ab for the servo [Pa]
+    h0: np.ndarray           # (R,3,3) reference cell for eps_v = ln(V/V0)
+    nbr_j: np.ndarray        # (R,N,K) int32 neighbour index
+    nbr_shift: np.ndarray    # (R,N,K) uint8 image shift code
+    nbr_count: np.ndarray    # (R,N) int32 entries used in each row
+    ft: np.ndarray           # (R,N,K,3) tangential force history (force on i) [N]
+    s_ref: np.ndarray        # (R,N,3) positions at the last list build
+    h_ref: np.ndarray        # (R,3,3) cell at the last list build
+    need_rebuild: np.ndarray  # (R,) int32, 1 = build the list before the next step
+    # scratch (not state): forces, torques, Cartesian positions, cell-list links
+    force: np.ndarray        # (R,N,3)
+    torque: np.ndarray       # (R,N,3)
+    x: np.ndarray            # (R,N,3)
+    link: np.ndarray         # (R,N+1+N) int32: cell-list heads then next pointers
+    wrapv: np.ndarray        # (R,N,3) int32 image counts removed at the last wrap
+    ncontact: np.ndarray     # (R,) int32 contacts at the last step
+    unbalanced: np.ndarray   # (R,) unbalanced-force ratio at the last step
+    kinetic: np.ndarray      # (R,) fluctuating kinetic energy at the last step [J]
+
+    @property
+    def n_rve(self) -> int:
+        return self.s.shape[0]
+
+    @property
+    def n_particles(self) -> int:
+        return self.s.shape[1]
+
+    @property
+    def capacity(self) -> int:
+        return self.nbr_j.shape[2]
+
+    def volume(self) -> np.ndarray:
+        """Cell volumes det h, (R,) [m^3]."""
+        return np.linalg.det(self.h)
+
+    def porosity(self) -> np.ndarray:
+        """1 - solid volume / cell volume, (R,)."""
+        solid = (4.0 / 3.0) * np.pi * np.sum(self.radius**3, axis=1)
+        return 1.0 - solid / self.volume()
+
+    def copy(self) -> RVEBatch:
+        return RVEBatch(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    def take(self, index) -> RVEBatch:
+        """A new batch made of the RVEs `index` (list or slice), copied."""
+        idx = np.atleast_1d(np.arange(self.n_rve)[index])
+        return RVEBatch(**{f.name: getattr(self, f.name)[idx].copy() for f in fields(self)})
+
+
+def allocate(n_rve: int, n_particles: int, capacity: int = 16) -> RVEBatch:
+    """Zeroed arrays for a batch; identity cells."""
+    r, n, k = n_rve, n_particles, capacity
+    eye = np.broadcast_to(np.eye(3), (r, 3, 3)).copy()
+    return RVEBatch(
+        h=eye.copy(), s=np.zeros((r, n, 3)), v=np.zeros((r, n, 3)), w=np.zeros((r, n, 3)),
+        rot=np.zeros((r, n)), radius=np.zeros((r, n)), mass=np.zeros((r, n)),
+        inertia=np.zeros((r, n)), L=np.zeros((r, 3, 3)), stress=np.zeros((r, 3, 3)),
+        stiffness=np.zeros((r, 3, 3)), h0=eye.copy(),
+        nbr_j=np.zeros((r, n, k), np.int32), nbr_shift=np.full((r, n, k), 13, np.uint8),
+        nbr_count=np.zeros((r, n), np.int32), ft=np.zeros((r, n, k, 3)),
+        s_ref=np.zeros((r, n, 3)), h_ref=eye.copy(), need_rebuild=np.ones(r, np.int32),
+        force=np.zeros((r, n, 3)), torque=np.zeros((r, n, 3)), x=np.zeros((r, n, 3)),
+        link=np.zeros((r, 2 * n + 1), np.int32), wrapv=np.zeros((r, n, 3), np.int32),
+        ncontact=np.zeros(r, np.int32), unbalanced=np.zeros(r), kinetic=np.zeros(r),
+    )
+
+
+def from_packing(h: np.ndarray, positions: np.ndarray, radii: np.ndarray, density: float,
+                 n_copies: int = 1, capacity: int = 16) -> RVEBatch:
+    """A batch of `n_copies` identical RVEs from a packing (cell, centres [m], radii [m])."""
+    n = len(radii)
+    b = allocate(n_copies, n, capacity)
+    s = np.linalg.solve(h, np.asarray(positions, float).T).T
+    s -= np.floor(s)
+    m = density * (4.0 / 3.0) * np.pi * radii**3
+    for r in range(n_copies):
+        b.h[r] = h
+        b.h0[r] = h
+        b.h_ref[r] = h
+        b.s[r] = s
+        b.radius[r] = radii
+        b.mass[r] = m
+        b.inertia[r] = 0.4 * m * radii**2
+    return b
+
+
+def concatenate(batches: list[RVEBatch]) -> RVEBatch:
+    """One batch of all RVEs of `batches` (same N; capacity grown to the largest)."""
+    k = max(b.capacity for b in batches)
+    batches = [grow_capacity(b.copy(), k) for b in batches]
+    return RVEBatch(**{f.name: np.concatenate([getattr(b, f.name) for b in batches])
+                       for f in fields(RVEBatch)})
+
+
+def grow_capacity(b: RVEBatch, capacity: int) -> RVEBatch:
+    """Grow the neighbour capacity of `b` in place to `capacity`; lists and history kept."""
+    r, n, k = b.nbr_j.shape
+    if capacity <= k:
+        return b
+    nbr_j = np.zeros((r, n, capacity), np.int32)
+    nbr_shift = np.full((r, n, capacity), 13, np.uint8)
+    ft = np.zeros((r, n, capacity, 3))
+    nbr_j[:, :, :k] = b.nbr_j
+    nbr_shift[:, :, :k] = b.nbr_shift
+    ft[:, :, :k] = b.ft
+    b.nbr_j, b.nbr_shift, b.ft = nbr_j, nbr_shift, ft
+    return b
+
+
+def state_arrays(b: RVEBatch) -> dict[str, np.ndarray]:
+    """The arrays that define the physical state (for HDF5 and checkpoints)."""
+    return {name: getattr(b, name) for name in STATE_FIELDS}
+
+
+def from_state_arrays(arrays: dict[str, np.ndarray]) -> RVEBatch:
+    """Rebuild a batch from `state_arrays` output; scratch is re-allocated."""
+    r, n, k = arrays["nbr_j"].shape
+    b = allocate(r, n, k)
+    for name in STATE_FIELDS:
+        setattr(b, name, np.array(arrays[name], dtype=getattr(b, name).dtype))
+    return b

@@ -1,0 +1,81 @@
+"""Packing exchange text format (design.md), for moving packings between codes.
+
+    # grainscale-packing v1
+    h00 h01 h02 h10 h11 h12 h20 h21 h22      (cell matrix, row-major; columns = edges)
+    x y z r                                  (one sphere a line, SI units)
+
+Files from YADE (`export.text`, `ymport.text` layout "x y z r", '#' comments) are read
+too when they carry the periodic cell in a comment line `# cell: h00 h01 ... h22`
+(row-major), because the text layout itself has no cell.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from grainscale.config.base import ConfigError
+
+HEADER = "# grainscale-packing v1"
+
+
+def write_packing(path: str | Path, h: np.ndarray, centres: np.ndarray,
+                  radii: np.ndarray) -> None:
+    """Write a packing atomically (a temporary file renamed into place)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as f:
+        f.write(HEADER + "\n")
+        f.write(" ".join(f"{v:.17g}" for v in np.asarray(h, float).ravel()) + "\n")
+        for (x, y, z), r in zip(centres, radii, strict=True):
+            f.write(f"{x:.17g} {y:.17g} {z:.17g} {r:.17g}\n")
+    os.replace(tmp, path)
+
+
+def read_packing(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read (h, centres, radii) from the exchange format or a YADE text export."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"packing file {str(path)!r} does not exist")
+    lines = path.read_text().splitlines()
+    h = None
+    rows = []
+    start = 0
+    if lines and lines[0].strip() == HEADER:
+        h = _numbers(lines[1], path, 2, 9).reshape(3, 3)
+        start = 2
+    for lineno, line in enumerate(lines[start:], start + 1):
+        text = line.strip()
+        if not text:
+            continue
+        if text.startswith("#"):
+            body = text.lstrip("#").strip()
+            if body.lower().startswith("cell:") and h is None:
+                h = _numbers(body[5:], path, lineno, 9).reshape(3, 3)
+            continue
+        rows.append(_numbers(text, path, lineno, 4))
+    if h is None:
+        raise ConfigError(
+            f"{path}: no periodic cell; start the file with '{HEADER}' and the 9 entries of "
+            f"h, or add a comment line '# cell: h00 h01 ... h22' (row-major)")
+    if not rows:
+        raise ConfigError(f"{path}: no spheres")
+    data = np.array(rows)
+    if np.any(data[:, 3] <= 0):
+        bad = int(np.argmax(data[:, 3] <= 0))
+        raise ConfigError(f"{path}: sphere {bad + 1} has radius {data[bad, 3]!r}; must be > 0")
+    if np.linalg.det(h) <= 0:
+        raise ConfigError(f"{path}: cell matrix has det = {np.linalg.det(h):.4g}; must be > 0")
+    return h, data[:, :3].copy(), data[:, 3].copy()
+
+
+def _numbers(text: str, path: Path, lineno: int, count: int) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in text.split()])
+    except ValueError:
+        raise ConfigError(f"{path}:{lineno}: expected {count} numbers, got {text!r}") from None
+    if values.size != count or not np.all(np.isfinite(values)):
+        raise ConfigError(f"{path}:{lineno}: expected {count} finite numbers, got {text!r}")
+    return values
