@@ -44,6 +44,10 @@ class Preparation(StrictModel):
     initial_porosity: float = Field(
         0.70, ge=0.55, lt=0.95,
         description="porosity of the random non-overlapping insertion (gas state)")
+    consolidation_pressure: float | None = Field(
+        None, gt=0,
+        description="pressure at which the porosity is set before unloading to `pressure` "
+        "[Pa] (default: max(pressure, young_modulus / 2e4))")
     compaction_friction: float | None = Field(
         None, ge=0, description="friction to start compaction with (default: friction)")
     damping: float = Field(0.5, ge=0, lt=1, description="local damping while preparing")

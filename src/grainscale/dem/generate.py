@@ -2,15 +2,19 @@
 
 1. Radii uniform in [r_min, r_max]; spheres inserted at random without overlap (largest
    first) in a cubic periodic cell at a loose `initial_porosity`.
-2. Servo-controlled isotropic compression to the target pressure with a compaction
-   friction (default: the real friction) until equilibrium.
+2. Servo-controlled isotropic compression to the consolidation pressure with a
+   compaction friction (default: the real friction) until equilibrium. Very stiff grains
+   at low pressure (E/p above 2e4, e.g. the column-collapse RVE at 500 Pa) jam only
+   slowly under a stress servo, so by default they are consolidated at p_c = E/2e4 and
+   unloaded to the target pressure at the end; unloading is elastic (strain ~ p_c/E), so
+   it changes the porosity by well under 1e-3.
 3. If a target porosity is given and the packing is looser, the compaction friction is
    lowered step by step, re-equilibrating at the target pressure each time: lower
    friction lets the packing densify. A step that overshoots the target is undone from a
    snapshot and retried with a smaller friction decrement, so porosity approaches the
    target from above.
-4. The real friction is restored and the packing relaxed at the target pressure until
-   the unbalanced-force ratio is below `preparation.unbalanced`.
+4. The real friction is restored and the packing relaxed (and unloaded) to the target
+   pressure until the unbalanced-force ratio is below `preparation.unbalanced`.
 
 Deterministic for a seed (one RNG, fixed operation order). If the target porosity
 cannot be reached, a GenerationError says which porosity range was reachable.
@@ -117,8 +121,10 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
     dt = engine.critical_dt(batch, cp, params.numerics.timestep_safety)
     mu = params.friction if prep.compaction_friction is None else prep.compaction_friction
 
-    def settle(friction: float) -> float:
-        consolidate(batch, contact_params(params, friction, prep.damping), prep.pressure, dt,
+    p_cons = prep.consolidation_pressure or max(prep.pressure, params.young_modulus / 2e4)
+
+    def settle(friction: float, pressure: float = p_cons) -> float:
+        consolidate(batch, contact_params(params, friction, prep.damping), pressure, dt,
                     prep.max_strain_rate, params.numerics.servo_gain, prep.unbalanced)
         n = float(batch.porosity()[0])
         say(f"compaction friction {friction:.4f}: porosity {n:.4f} at "
@@ -132,14 +138,14 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
             raise GenerationError(
                 f"rve.preparation.porosity = {target} is looser than what compaction "
                 f"reaches: compaction friction {mu} gives porosity {n:.4f} at p = "
-                f"{prep.pressure:g} Pa; reachable here: porosity <= {n:.4f} (raise "
+                f"{p_cons:g} Pa; reachable here: porosity <= {n:.4f} (raise "
                 f"rve.preparation.compaction_friction for looser packings)")
         factor = 0.7
         while n > target + 0.5 * tol:
             if mu == 0.0:
                 raise GenerationError(
                     f"rve.preparation.porosity = {target} is denser than what frictionless "
-                    f"compaction reaches: porosity {n:.4f} at p = {prep.pressure:g} Pa; "
+                    f"compaction reaches: porosity {n:.4f} at p = {p_cons:g} Pa; "
                     f"reachable here: porosity >= {n:.4f}")
             snapshot = batch.copy()
             trial = mu * factor if mu * factor > 1e-3 else 0.0
@@ -153,8 +159,8 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
                         f"± {tol}: {n:.4f} -> {n_trial:.4f}; widen porosity_tolerance")
                 continue
             mu, n = trial, n_trial
-    # real friction restored, relaxed to equilibrium
-    n = settle(params.friction)
+    # real friction restored, relaxed (and unloaded) to equilibrium at the target pressure
+    n = settle(params.friction, prep.pressure)
     if target is not None and abs(n - target) > tol:
         raise GenerationError(
             f"restoring friction {params.friction} moved the porosity to {n:.4f}, outside "

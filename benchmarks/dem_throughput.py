@@ -1,0 +1,120 @@
+"""DEM throughput: ns per particle-step of the 800-sphere unit-element RVE in triaxial
+shear (one thread), Verlet-skin variants as ratios, and the parallel efficiency of a batch
+of RVEs on all cores.
+
+    python benchmarks/dem_throughput.py [--steps 20000] [--batch 8] [--quick]
+
+Prints a table; the last line is one JSON object with at least `ns_per_particle_step`
+(single thread, shear) and `parallel_efficiency`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import numba
+import numpy as np
+
+from grainscale.config.rve import RVEParams
+from grainscale.dem import engine
+from grainscale.dem.generate import contact_params, generate
+from grainscale.dem.state import RVEBatch, concatenate, state_arrays
+
+
+def shear_control(batch: RVEBatch, rate: float = 0.1) -> engine.Control:
+    """Drained triaxial: axis z shortened at `rate`, lateral stresses servo-held at 100 kPa."""
+    ctrl = engine.rate_control(batch.n_rve, servo={0: -100e3, 1: -100e3}, max_rate=10 * rate)
+    ctrl.hdot_fixed[:, 2, :] = -rate * batch.h[:, 2, :]
+    return ctrl
+
+
+def time_steps(batch: RVEBatch, cp: engine.ContactParams, ctrl: engine.Control, dt: float,
+               steps: int, repeats: int = 3) -> float:
+    """Best wall time [s] of `steps` steps over `repeats` runs from the same state."""
+    best = np.inf
+    for _ in range(repeats):
+        b = batch.copy()
+        t0 = time.perf_counter()
+        engine.advance(b, steps, dt, cp, ctrl)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=20000)
+    ap.add_argument("--batch", type=int, default=8, help="RVEs in the parallel batch")
+    ap.add_argument("--quick", action="store_true", help="fewer steps (smoke test)")
+    args = ap.parse_args()
+    steps = 2000 if args.quick else args.steps
+    params = RVEParams(preparation={"pressure": 100e3, "porosity": 0.373})
+    print("generating the unit-element RVE (800 spheres, n = 0.373, p = 100 kPa) ...")
+    base = generate(params)
+    cp = contact_params(params)
+    dt = engine.critical_dt(base, cp, params.numerics.timestep_safety)
+    # move into the shear regime first (2 % axial strain) so contacts slide and lists churn
+    engine.advance(base, int(0.02 / (0.1 * dt) / 10), dt, cp, shear_control(base, 1.0))
+    n = base.n_particles
+
+    numba.set_num_threads(1)
+    rows = []
+    ref = None
+    for skin_ratio in (0.1, 0.25, 0.5, 1.0):
+        cpv = engine.ContactParams(cp.young, cp.stiffness_ratio, cp.friction, cp.damping,
+                                   skin_ratio * params.radius_min)
+        b = base.copy()
+        b.need_rebuild[:] = 1
+        engine.advance(b, 10, dt, cpv, shear_control(b))  # compile / build lists
+        t = time_steps(b, cpv, shear_control(b), dt, steps)
+        ns = t / (steps * n) * 1e9
+        ref = ns if skin_ratio == 0.25 else ref
+        rows.append((skin_ratio, ns, float(b.nbr_count.mean())))
+    print(f"\nsingle thread, 800 spheres, triaxial shear, {steps} steps, best of 3")
+    print(f"{'skin/r_min':>10} {'ns/particle-step':>17} {'ratio to 0.25':>14} {'list/particle':>14}")
+    for skin_ratio, ns, per in rows:
+        print(f"{skin_ratio:>10.2f} {ns:>17.1f} {ns / ref:>14.2f} {per:>14.2f}")
+    ns_default = ref
+
+    # batch of RVEs: copies with different velocities so they decorrelate
+    rng = np.random.default_rng(0)
+    copies = []
+    for _ in range(args.batch):
+        c = base.copy()
+        c.v += rng.normal(0.0, 1e-4, c.v.shape)
+        copies.append(c)
+    batch = concatenate(copies)
+    ctrl = shear_control(batch)
+    engine.advance(batch, 10, dt, cp, ctrl)
+    bsteps = max(steps // 4, 500)
+    numba.set_num_threads(1)
+    t1 = time_steps(batch, cp, ctrl, dt, bsteps, repeats=2)
+    cores = numba.config.NUMBA_NUM_THREADS
+    numba.set_num_threads(cores)
+    tp = time_steps(batch, cp, ctrl, dt, bsteps, repeats=2)
+    eff = t1 / (cores * tp)
+    ps1 = args.batch * n * bsteps / t1
+    psp = args.batch * n * bsteps / tp
+    mem = sum(a.nbytes for a in state_arrays(batch).values()) + sum(
+        getattr(batch, k).nbytes for k in ("force", "torque", "x", "link", "wrapv"))
+    print(f"\nbatch of {args.batch} RVEs x {n} spheres, {bsteps} steps")
+    print(f"{'threads':>8} {'particle-steps/s':>18}")
+    print(f"{1:>8} {ps1:>18.3e}")
+    print(f"{cores:>8} {psp:>18.3e}")
+    print(f"parallel efficiency on {cores} threads: {eff:.3f}")
+    print(f"memory per particle (state + scratch, capacity {batch.capacity}): "
+          f"{mem / (args.batch * n):.0f} B")
+    print(json.dumps({
+        "ns_per_particle_step": round(ns_default, 2), "parallel_efficiency": round(eff, 3),
+        "threads": cores, "particle_steps_per_s_all_threads": round(psp),
+        "bytes_per_particle": round(mem / (args.batch * n)),
+        "skin_variants_ns": {str(s): round(v, 2) for s, v, _ in rows},
+        "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+    }))
+
+
+if __name__ == "__main__":
+    main()
