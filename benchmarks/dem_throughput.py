@@ -74,7 +74,8 @@ def main() -> None:
         ref = ns if skin_ratio == 0.25 else ref
         rows.append((skin_ratio, ns, float(b.nbr_count.mean())))
     print(f"\nsingle thread, 800 spheres, triaxial shear, {steps} steps, best of 3")
-    print(f"{'skin/r_min':>10} {'ns/particle-step':>17} {'ratio to 0.25':>14} {'list/particle':>14}")
+    print(f"{'skin/r_min':>10} {'ns/particle-step':>17} {'ratio to 0.25':>14} "
+          f"{'list/particle':>14}")
     for skin_ratio, ns, per in rows:
         print(f"{skin_ratio:>10.2f} {ns:>17.1f} {ns / ref:>14.2f} {per:>14.2f}")
     ns_default = ref

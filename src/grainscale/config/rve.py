@@ -118,7 +118,7 @@ class ShearTest(StrictModel):
     """Simple shear: gamma = 2 eps_xz rate given, normal stress on z servo-held."""
 
     normal_stress: float = Field(100e3, gt=0, description="[Pa]")
-    shear_strain: float = Field(0.5, gt=0, lt=3.0)
+    shear_strain: float = Field(0.5, gt=0, le=20.0)
     strain_rate: float = Field(0.1, gt=0, description="shear rate d gamma/dt [1/s]")
     output_interval: float = Field(0.002, gt=0)
 

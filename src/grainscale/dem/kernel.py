@@ -109,11 +109,12 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
                 ft[i, k, 2] = 0.0
                 continue
             dist = math.sqrt(dist2)
-            inv = 1.0 / dist
+            inv2 = 1.0 / (dist * rr)  # one division serves 1/dist and 1/rr
+            inv = inv2 * rr
             n0 = d0 * inv
             n1 = d1 * inv
             n2 = d2 * inv
-            kn = young * 2.0 * ri * rj / rr
+            kn = young * 2.0 * ri * rj * dist * inv2
             fn = kn * (rr - dist)
             # relative velocity of j's surface w.r.t. i's at the contact point
             wa0 = ri * w[i, 0] + rj * w[j, 0]

@@ -21,6 +21,7 @@ from numba import njit
 from grainscale.dem.cell import perpendicular_widths
 
 SHIFT_ZERO = 13  # code of the image shift (0, 0, 0)
+INVALID_SHIFT = 255  # an entry awaiting removal by the next build (never matched)
 OK, OVERFLOW, TOO_THIN = 0, 1, 2
 
 
