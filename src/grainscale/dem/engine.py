@@ -67,15 +67,17 @@ def rate_control(n_rve: int, l_ctrl=None, servo: dict | None = None,
                    np.full(n_rve, float(max_rate)))
 
 
-def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps: int, dt: float) -> Control:
+def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps, dt: float) -> Control:
     """Deform each cell by h <- (I + dH) h, spread evenly over nsteps steps of dt.
 
     h moves linearly, h_k = h_0 + (k/n) dH h_0, so after n steps it is exactly
-    (I + dH) h_0; dH (R,3,3) is the displacement-gradient increment, dH[a,b] = du_a/dx_b.
+    (I + dH) h_0; dH (R,3,3) is the displacement-gradient increment, dH[a,b] = du_a/dx_b;
+    nsteps is one count or one per RVE.
     """
     r = batch.n_rve
     dH = np.broadcast_to(np.asarray(dH, float), (r, 3, 3))
-    hdot = np.einsum("rab,rbc->rac", dH, batch.h) / (nsteps * dt)
+    n = np.broadcast_to(np.asarray(nsteps, float), (r,))
+    hdot = np.einsum("rab,rbc->rac", dH, batch.h) / (n * dt)[:, None, None]
     return Control(hdot, np.zeros((r, 3, 3)), np.zeros((r, 3, 3), np.int32),
                    np.zeros((r, 3, 3)), 0.0, np.zeros(r))
 
