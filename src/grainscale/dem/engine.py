@@ -32,11 +32,13 @@ class ContactParams:
 class Control:
     """How the cell moves during a call: fixed hdot plus a velocity gradient with servos.
 
-    hdot = hdot_fixed + L h, where L = l_ctrl except on the components with
+    h_new = e_step h + dt (hdot_fixed + L h), where L = l_ctrl except on the components with
     servo_mask = 1 (upper triangle read; a shear servo moves L_ab = L_ba), which follow a
     proportional servo to servo_target (Cauchy, tension positive, Pa): per step the
     strain change is servo_gain x (stress error) / (affine stiffness), clipped to
-    max_rate [1/s].
+    max_rate [1/s]. e_step is an exact per-step map (identity unless an MPM increment
+    is applied) and l_mean its velocity gradient log(e_step)/dt, used for contact
+    velocities.
     """
 
     hdot_fixed: np.ndarray    # (R,3,3) [m/s]
@@ -45,6 +47,8 @@ class Control:
     servo_target: np.ndarray  # (R,3,3) [Pa]
     servo_gain: float = 0.05
     max_rate: np.ndarray | None = None  # (R,) [1/s]
+    e_step: np.ndarray | None = None    # (R,3,3) [-], default identity
+    l_mean: np.ndarray | None = None    # (R,3,3) [1/s], default zero
 
 
 def rate_control(n_rve: int, l_ctrl=None, servo: dict | None = None,
@@ -67,19 +71,50 @@ def rate_control(n_rve: int, l_ctrl=None, servo: dict | None = None,
                    np.full(n_rve, float(max_rate)))
 
 
-def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps, dt: float) -> Control:
-    """Deform each cell by h <- (I + dH) h, spread evenly over nsteps steps of dt.
+def _logm_near_identity(a: np.ndarray) -> np.ndarray:
+    """log(I + a) for a batch (R,3,3) of small a by its power series [-]."""
+    norm = np.linalg.norm(a, axis=(1, 2)).max(initial=0.0)
+    if norm >= 0.5:
+        raise ValueError(f"displacement-gradient increment too large: |dH| = {norm:.3g} "
+                         "(must be < 0.5; take smaller MPM steps)")
+    out = np.zeros_like(a)
+    term = np.broadcast_to(np.eye(3), a.shape).copy()
+    for k in range(1, 64):
+        term = term @ a
+        out += ((-1) ** (k + 1) / k) * term
+        if norm**k / k < 1e-18:
+            break
+    return out
 
-    h moves linearly, h_k = h_0 + (k/n) dH h_0, so after n steps it is exactly
-    (I + dH) h_0; dH (R,3,3) is the displacement-gradient increment, dH[a,b] = du_a/dx_b;
-    nsteps is one count or one per RVE.
+
+def _expm_small(x: np.ndarray) -> np.ndarray:
+    """exp(x) for a batch (R,3,3) of small x by its Taylor series [-]."""
+    out = np.broadcast_to(np.eye(3), x.shape).copy()
+    term = out.copy()
+    for k in range(1, 32):
+        term = term @ x / k
+        out += term
+        if np.abs(term).max(initial=0.0) < 1e-20:
+            break
+    return out
+
+
+def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps, dt: float) -> Control:
+    """Deform each cell by h <- (I + dH) h over nsteps steps of dt, at a constant L.
+
+    Each step maps h to E h with E = exp(log(I + dH)/n), so after n steps h is exactly
+    (I + dH) h_0 and every intermediate cell lies on the constant-velocity-gradient path
+    L = log(I + dH)/(n dt): a rotation stays a rotation at every step (no spurious
+    stretch, objectivity). dH (R,3,3), dH[a,b] = du_a/dx_b; nsteps one count or per RVE.
+    Contacts see the path's velocity gradient L = log(E)/dt exactly.
     """
     r = batch.n_rve
     dH = np.broadcast_to(np.asarray(dH, float), (r, 3, 3))
     n = np.broadcast_to(np.asarray(nsteps, float), (r,))
-    hdot = np.einsum("rab,rbc->rac", dH, batch.h) / (n * dt)[:, None, None]
-    return Control(hdot, np.zeros((r, 3, 3)), np.zeros((r, 3, 3), np.int32),
-                   np.zeros((r, 3, 3)), 0.0, np.zeros(r))
+    log_step = _logm_near_identity(dH) / n[:, None, None]
+    zero = np.zeros((r, 3, 3))
+    return Control(zero, zero.copy(), np.zeros((r, 3, 3), np.int32), zero.copy(), 0.0,
+                   np.zeros(r), e_step=_expm_small(log_step), l_mean=log_step / dt)
 
 
 def critical_dt(batch: RVEBatch, params: ContactParams, safety: float = 0.3) -> float:
@@ -93,7 +128,11 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
     remaining = np.broadcast_to(np.asarray(nsteps, np.int64), (batch.n_rve,)).copy()
     status = np.zeros(batch.n_rve, np.int64)
     out = np.zeros((batch.n_rve, 5))
-    max_rate = control.max_rate if control.max_rate is not None else np.zeros(batch.n_rve)
+    r = batch.n_rve
+    max_rate = control.max_rate if control.max_rate is not None else np.zeros(r)
+    e_step = control.e_step if control.e_step is not None else np.broadcast_to(
+        np.eye(3), (r, 3, 3)).copy()
+    l_mean = control.l_mean if control.l_mean is not None else np.zeros((r, 3, 3))
     while remaining.max() > 0:
         advance_batch(remaining, dt, params.young, params.stiffness_ratio, params.friction,
                       params.damping, params.skin, batch.h, batch.s, batch.v, batch.w,
@@ -101,7 +140,8 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
                       batch.stress, batch.stiffness, batch.nbr_j, batch.nbr_shift,
                       batch.nbr_count, batch.ft, batch.s_ref, batch.h_ref,
                       batch.need_rebuild, batch.force, batch.torque, batch.x, batch.link,
-                      batch.wrapv, control.hdot_fixed, control.l_ctrl, control.servo_mask,
+                      batch.wrapv, e_step, l_mean, control.hdot_fixed, control.l_ctrl,
+                      control.servo_mask,
                       control.servo_target, control.servo_gain, max_rate, status, out)
         remaining -= out[:, 4].astype(np.int64)
         batch.ncontact[:] = out[:, 0]

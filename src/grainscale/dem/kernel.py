@@ -5,15 +5,21 @@ work of one RVE never touches another's arrays, so an RVE alone and the same RVE
 a batch follow the same arithmetic. Nothing is allocated per step.
 
 Per step of one RVE (dt fixed):
-1. cell control: L = L_ctrl, with each servo-controlled component replaced by
+1. cell control: h_new = E h + dt (hdot_fixed + L_c h), with E a fixed step map (the
+   MPM increment: exp(log(I + dH)/n)) and L_c = L_ctrl except that each servo-controlled
+   component is replaced by
    L_kk = g (sigma*_kk - sigma_kk) / (C_kk dt) on the diagonal and, for a shear pair,
    L_ab = L_ba = g (sigma*_ab - sym sigma_ab) / (2 C_ab dt) (clipped to +-max_rate),
    where C_ab = (1/V) sum kn |d|^2 n_a^2 n_b^2 is the affine stiffness of the last step;
-   hdot = hdot_fixed + L h; mean-field velocity gradient L = hdot h^-1.
+   the mean-field velocity gradient is L = L_mean + (hdot_fixed + L_c h) h^-1, where
+   L_mean = log(E)/dt is the exact rate of the step map (skew for a rotation).
 2. contacts over the half list (seed Eq. 7-10): kn = E r*, r* = 2 ri rj/(ri + rj),
    kt = ratio kn; f_n = kn delta; tangential force history rotated with the contact
    frame, incremented by kt v_t dt and capped at mu f_n. The relative velocity includes
-   the mean-field term L d across periodic images.
+   the mean-field term D d across periodic images (D = sym L: the mean field carries a
+   pair rigidly with its spin W = skew L, which only turns the contact frame), and
+   particle spins w are fluctuations about W; a rigidly rotating cell therefore makes no
+   slip at any contact (objectivity).
 3. Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
    first particle and d = x_j - x_i, so compression is negative (tension positive).
 4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion:
@@ -83,6 +89,12 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
     sp0 = 0.5 * (L[2, 1] - L[1, 2])
     sp1 = 0.5 * (L[0, 2] - L[2, 0])
     sp2 = 0.5 * (L[1, 0] - L[0, 1])
+    D00 = L[0, 0]
+    D11 = L[1, 1]
+    D22 = L[2, 2]
+    D01 = 0.5 * (L[0, 1] + L[1, 0])
+    D02 = 0.5 * (L[0, 2] + L[2, 0])
+    D12 = 0.5 * (L[1, 2] + L[2, 1])
     sxx = sxy = sxz = syx = syy = syz = szx = szy = szz = 0.0
     c00 = c11 = c22 = c01 = c02 = c12 = 0.0
     ncontact = 0
@@ -116,16 +128,16 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
             n2 = d2 * inv
             kn = young * 2.0 * ri * rj * dist * inv2
             fn = kn * (rr - dist)
-            # relative velocity of j's surface w.r.t. i's at the contact point
+            # relative velocity of j's surface w.r.t. i's at the contact point. The mean
+            # field moves the pair rigidly with its spin W, so only its strain rate D
+            # enters (a spinning cell makes no slip); particle spins w are fluctuations
+            # about W.
             wa0 = ri * w[i, 0] + rj * w[j, 0]
             wa1 = ri * w[i, 1] + rj * w[j, 1]
             wa2 = ri * w[i, 2] + rj * w[j, 2]
-            vr0 = v[j, 0] - v[i, 0] + L[0, 0] * d0 + L[0, 1] * d1 + L[0, 2] * d2 \
-                - (wa1 * n2 - wa2 * n1)
-            vr1 = v[j, 1] - v[i, 1] + L[1, 0] * d0 + L[1, 1] * d1 + L[1, 2] * d2 \
-                - (wa2 * n0 - wa0 * n2)
-            vr2 = v[j, 2] - v[i, 2] + L[2, 0] * d0 + L[2, 1] * d1 + L[2, 2] * d2 \
-                - (wa0 * n1 - wa1 * n0)
+            vr0 = v[j, 0] - v[i, 0] + D00 * d0 + D01 * d1 + D02 * d2 - (wa1 * n2 - wa2 * n1)
+            vr1 = v[j, 1] - v[i, 1] + D01 * d0 + D11 * d1 + D12 * d2 - (wa2 * n0 - wa0 * n2)
+            vr2 = v[j, 2] - v[i, 2] + D02 * d0 + D12 * d1 + D22 * d2 - (wa0 * n1 - wa1 * n0)
             vn = vr0 * n0 + vr1 * n1 + vr2 * n2
             # history: turn with the contact frame (mean-field spin plus the particles'
             # twist about n, to first order in dt), then drop its normal component
@@ -235,7 +247,8 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
                 h, s, v, w, rot, radius, mass, inertia, L, stress, stiffness,
                 nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
                 force, torque, x, link, wrapv,
-                hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain, max_rate, out):
+                e_step, l_mean, hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
+                max_rate, out):
     """Advance one RVE by `nsteps` steps of dt [s]; see the module docstring.
 
     `out` (5,) receives: contacts, unbalanced-force ratio, kinetic energy [J], the row
@@ -245,6 +258,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
     table = np.empty((27, 3))
     hdot = np.empty((3, 3))
     hinv = np.empty((3, 3))
+    hnew = np.empty((3, 3))
     lc = np.empty((3, 3))
     rmax = 0.0
     for i in range(n):
@@ -289,10 +303,12 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
             for b in range(3):
                 hdot[a, b] = hdot_fixed[a, b] + lc[a, 0] * h[0, b] + lc[a, 1] * h[1, b] \
                     + lc[a, 2] * h[2, b]
+                hnew[a, b] = e_step[a, 0] * h[0, b] + e_step[a, 1] * h[1, b] \
+                    + e_step[a, 2] * h[2, b] + dt * hdot[a, b]
         _inv3(h, hinv)
         for a in range(3):
             for b in range(3):
-                L[a, b] = hdot[a, 0] * hinv[0, b] + hdot[a, 1] * hinv[1, b] \
+                L[a, b] = l_mean[a, b] + hdot[a, 0] * hinv[0, b] + hdot[a, 1] * hinv[1, b] \
                     + hdot[a, 2] * hinv[2, b]
         # 2-3. contacts, and stress where a servo or the caller needs it
         last = _step == nsteps - 1
@@ -302,7 +318,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
         # 5 (first half). new cell, its inverse for the position update
         for a in range(3):
             for b in range(3):
-                h[a, b] += dt * hdot[a, b]
+                h[a, b] = hnew[a, b]
         _inv3(h, hinv)
         # 4. integration (damping opposes the fluctuating velocity, seed's YADE style)
         umax2 = 0.0
@@ -370,8 +386,8 @@ def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
                   h, s, v, w, rot, radius, mass, inertia, L, stress, stiffness,
                   nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
                   force, torque, x, link, wrapv,
-                  hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain, max_rate,
-                  status, out):
+                  e_step, l_mean, hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
+                  max_rate, status, out):
     """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs."""
     for r in prange(s.shape[0]):
         status[r] = advance_rve(
@@ -379,5 +395,5 @@ def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
             h[r], s[r], v[r], w[r], rot[r], radius[r], mass[r], inertia[r], L[r],
             stress[r], stiffness[r], nbr_j[r], nbr_shift[r], nbr_count[r], ft[r],
             s_ref[r], h_ref[r], need_rebuild[r:r + 1], force[r], torque[r], x[r],
-            link[r], wrapv[r], hdot_fixed[r], l_ctrl[r], servo_mask[r], servo_target[r],
-            servo_gain, max_rate[r], out[r])
+            link[r], wrapv[r], e_step[r], l_mean[r], hdot_fixed[r], l_ctrl[r],
+            servo_mask[r], servo_target[r], servo_gain, max_rate[r], out[r])

@@ -30,8 +30,8 @@ class RVEBatch:
     h: np.ndarray            # (R,3,3) cell matrix, edge vectors as columns [m]
     s: np.ndarray            # (R,N,3) fractional positions (unwrapped between list builds)
     v: np.ndarray            # (R,N,3) fluctuating velocity [m/s]
-    w: np.ndarray            # (R,N,3) angular velocity [rad/s]
-    rot: np.ndarray          # (R,N) accumulated rotation angle, integral of |w| dt [rad]
+    w: np.ndarray            # (R,N,3) angular velocity about the mean-field spin [rad/s]
+    rot: np.ndarray          # (R,N) accumulated rolling angle, integral of |w| dt [rad]
     radius: np.ndarray       # (R,N) [m]
     mass: np.ndarray         # (R,N) [kg]
     inertia: np.ndarray      # (R,N) moment of inertia 2/5 m r^2 [kg m^2]
