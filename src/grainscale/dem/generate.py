@@ -153,6 +153,8 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
             if n_trial < target - tol:  # overshoot: undo, take a smaller step
                 batch = snapshot
                 factor = factor ** 0.5
+                if factor > 0.999 and abs(n - target) <= tol:
+                    break  # within tolerance and no finer step exists: keep it
                 if factor > 0.999:
                     raise GenerationError(
                         f"porosity jumps past rve.preparation.porosity = {target} "
