@@ -115,7 +115,8 @@ class RVEMaterial:
         self.batch = from_state_arrays({k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS})
         self.theta_prev = np.asarray(state["theta_prev"], float).copy()
         self.assignment = np.asarray(state["assignment"]).copy()
-        engine.refresh(self.batch, self.cp)
+        # no refresh here: re-evaluating contacts would re-project the tangential history
+        # at the saved positions, and a resumed run must continue bitwise
 
     def point_fields(self) -> dict[str, np.ndarray]:
         """Per-point RVE quantities for VTK frames and history: porosity, coordination,

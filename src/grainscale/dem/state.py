@@ -20,7 +20,7 @@ import numpy as np
 # per-RVE arrays that define the physical state (saved in checkpoints and .h5 files)
 STATE_FIELDS = ("h", "s", "v", "w", "rot", "radius", "mass", "inertia", "L", "stress",
                 "stiffness", "h0", "nbr_j", "nbr_shift", "nbr_count", "ft", "s_ref",
-                "h_ref", "need_rebuild")
+                "h_ref", "need_rebuild", "ncontact", "unbalanced", "kinetic")
 
 
 @dataclass
