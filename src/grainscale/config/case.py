@@ -140,6 +140,7 @@ class TractionCfg(StrictModel):
     lo: Vec3  # m, box selecting the loaded points (their centres)
     hi: Vec3
     traction: Vec3  # Pa
+    surface: Face  # side of the points carrying the load (outward normal), e.g. "x+"
     ramp_time: NonNeg = 0.0  # s, linear ramp from start_time
     start_time: float | None = None  # s; default time.start
     end_time: float | None = None  # s; default never

@@ -6,8 +6,11 @@
   t >= end_time, as the column release of validation case 2).
 - Point tractions (Neumann): a traction vector t (Pa) on the material points selected by
   a box; each carries the force t * A_p with the tributary area A_p = V0_p^(2/3) (the
-  face of its cubic sub-cell), mapped to the nodes with S_Ip as the surface term of seed
-  Eq. 6. Nominal traction: the area is not updated with the deformation.
+  face of its cubic sub-cell). The surface term of seed Eq. 6, int N_I t dS, is evaluated
+  at the point's surface position x_p + l_p n (n the outward normal of the loaded
+  surface) with linear weights, so the load reaches the nodes of the surface itself and
+  the outermost cell carries the full stress (mapping it from x_p instead leaves a
+  quarter of it on the next node plane in). Nominal traction: the area is not updated.
 - Local non-viscous damping (Cundall): f_I <- f_I - alpha |f_I| sign(v_I) per component,
   for quasi-static initialisation (geostatic stress), switched off at `end_time`.
 """
@@ -82,6 +85,7 @@ def local_damping(f: np.ndarray, v: np.ndarray, alpha: float) -> None:
 class Traction:
     points: np.ndarray  # (n,) int64 ids of the loaded points
     force: np.ndarray  # (n, 3) N, full force t * A_p of each point
+    normal: np.ndarray  # (3,) outward unit normal of the loaded surface
     ramp_time: float = 0.0  # s, linear ramp from start_time
     start_time: float = 0.0
     end_time: float = np.inf
@@ -94,18 +98,42 @@ class Traction:
         return 1.0
 
 
-def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, **timing) -> Traction:
-    """Traction on the points whose centres lie in [lo, hi]; force = t * V0^(2/3)."""
+def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: str,
+                  **timing) -> Traction:
+    """Traction on the points whose centres lie in [lo, hi], on their `surface` side
+    ('x+', 'z-', ...); force = t * V0^(2/3)."""
     sel = np.flatnonzero(np.all((x >= np.asarray(lo)) & (x <= np.asarray(hi)), axis=1))
     area = np.cbrt(vol0[sel]) ** 2
     force = area[:, None] * np.asarray(traction, dtype=np.float64)[None, :]
-    return Traction(sel.astype(np.int64), force, **timing)
+    axis, side = FACES[surface]
+    normal = np.zeros(3)
+    normal[axis] = 1.0 if side else -1.0
+    return Traction(sel.astype(np.int64), force, normal, **timing)
 
 
-def point_forces(tractions: list[Traction], time: float, out: np.ndarray) -> None:
-    """out (P,3) <- sum of the active traction forces on each point."""
-    out[:] = 0.0
+def traction_nodal_forces(tractions: list[Traction], time: float, x: np.ndarray,
+                          lp: np.ndarray, grid: Grid) -> np.ndarray | None:
+    """Nodal forces (n_nodes, 3) of the active tractions, or None if there are none.
+
+    Summed point by point in a fixed order (np.add.at is sequential), so the result does
+    not depend on the thread count.
+    """
+    from grainscale.mpm.shape import LINEAR, evaluate
+
+    out = None
     for t in tractions:
         k = t.factor(time)
-        if k != 0.0:
-            np.add.at(out, t.points, k * t.force)
+        if k == 0.0:
+            continue
+        xs = np.ascontiguousarray(x[t.points] + lp[t.points, None] * t.normal[None, :])
+        base, w, _ = evaluate(xs, np.zeros(len(xs)), grid, LINEAR)
+        nx, ny = int(grid.nodes[0]), int(grid.nodes[1])
+        if out is None:
+            out = np.zeros((grid.n_nodes, 3))
+        for i in range(2):
+            for j in range(2):
+                for kk in range(2):
+                    ids = base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk))
+                    S = w[:, 0, i] * w[:, 1, j] * w[:, 2, kk]
+                    np.add.at(out, ids, (k * S)[:, None] * t.force)
+    return out

@@ -1,9 +1,12 @@
 """A rigid body made of material points, moving with a prescribed velocity history.
 
 Velocity: zero before `start_time`, a linear ramp to `velocity` over `ramp_time`, then
-constant. Every step the body marks the grid nodes it covers (any node with a shape
-weight above 1e-12 from one of its points) and imposes its velocity there, on top of the
-ordinary boundary conditions. The force it needs to do so is its reaction: at a covered
+constant. Every step the body marks the grid nodes it covers (nodes inside or on the
+surface of its points' domains, |x_I - x_p| <= l_p per axis) and imposes its velocity
+there, on top of the ordinary boundary conditions. (Marking every node within the shape
+functions' support instead would reach a cell beyond the surface and stiffen the
+contact.) The contact surface therefore advances node plane by node plane: the reaction
+of a moving body has a ripple with the period of one cell in depth. The force it needs to do so is its reaction: at a covered
 node with material mass m_I, momentum p_I and force f_I, the body supplies
 F_I = (m_I v_body - p_I)/dt - f_I; the force of the material on the body is -sum F_I.
 The body has no mass on the grid (its own inertia is irrelevant to a prescribed motion).
@@ -16,8 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from grainscale.mpm.grid import Grid
-from grainscale.mpm.shape import evaluate, stencil_width
-from grainscale.mpm.transfer import mark_nodes_kernel
+from grainscale.mpm.transfer import mark_covered_nodes_kernel
 
 
 @dataclass
@@ -37,11 +39,11 @@ class RigidBody:
             return self.velocity * ((t - self.start_time) / self.ramp_time)
         return self.velocity.copy()
 
-    def covered_nodes(self, grid: Grid, kind: str) -> np.ndarray:
+    def covered_nodes(self, grid: Grid) -> np.ndarray:
         """Ids of the nodes the body covers at its current position."""
-        base, w, _ = evaluate(self.x, self.lp, grid, kind)
         mark = np.zeros(grid.n_nodes, dtype=np.bool_)
-        mark_nodes_kernel(base, w, grid.nodes, stencil_width(kind), 1e-12, mark)
+        mark_covered_nodes_kernel(self.x, self.lp, grid.origin, grid.cell_size, grid.cells,
+                                  mark)
         return np.flatnonzero(mark)
 
     def advance(self, t: float, dt: float) -> None:

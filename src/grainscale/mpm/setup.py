@@ -102,7 +102,7 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         constraints.append(boundary.constraint(nodes, bc.type, normal, end))
     tractions = []
     for i, t in enumerate(case.tractions):
-        tr = boundary.make_traction(pts.x, pts.vol0, t.lo, t.hi, t.traction,
+        tr = boundary.make_traction(pts.x, pts.vol0, t.lo, t.hi, t.traction, t.surface,
                                     ramp_time=t.ramp_time,
                                     start_time=t0 if t.start_time is None else t.start_time,
                                     end_time=np.inf if t.end_time is None else t.end_time)

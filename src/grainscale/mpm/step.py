@@ -56,7 +56,7 @@ class MPMState:
         self.ns = stencil_width(self.shape)
         self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads)
         self.dH = np.zeros((P, 3, 3))
-        self.fext = np.zeros((P, 3))
+        self.fext = np.zeros((P, 3))  # N, point forces (none yet: tractions act on nodes)
         self.vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
         self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
         self.chunk_out = np.zeros_like(self.transfer.chunk_count)
@@ -93,7 +93,7 @@ def rigid_velocity(s: MPMState, dt: float) -> None:
     if s.rigid is None:
         s.rigid_nodes = np.zeros(0, dtype=np.int64)
         return
-    s.rigid_nodes = s.rigid.covered_nodes(s.grid, s.shape)
+    s.rigid_nodes = s.rigid.covered_nodes(s.grid)
     s.rigid_v = s.rigid.velocity_at(s.time + 0.5 * dt)
 
 
@@ -125,28 +125,36 @@ def update_stress(s: MPMState, vgrid: np.ndarray, dt: float) -> None:
 def nodal_forces(s: MPMState) -> None:
     """f_I = f_int + f_ext (seed Eq. 5-6): stress divergence, gravity, point tractions."""
     pts = s.points
-    boundary.point_forces(s.tractions, s.time, s.fext)
     s.force = s.transfer.force(pts.m, pts.vol, pts.stress, s.fext, s.gravity,
                                s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns)
+    ft = boundary.traction_nodal_forces(s.tractions, s.time, pts.x, pts.lp, s.grid)
+    if ft is not None:
+        s.force += ft
 
 
 def integrate_grid(s: MPMState, dt: float) -> None:
     """p_I <- m_I v_I + dt f_I (seed Eq. 3), with damping, Dirichlet conditions and the
     rigid body; the rigid body's reaction is recorded."""
     f = s.force
+    if s.rigid is not None:
+        # the force the body exerts on the nodes it covers is (m_I v_body - p_I)/dt - f_I;
+        # the material pushes back with minus its sum (damping does not enter: it is a
+        # numerical device of the free nodes)
+        rn = s.rigid_nodes
+        target = s.mass[rn, None] * s.rigid_v[None, :]
+        p_rn = s.mass[rn, None] * s.v_old[rn] + dt * f[rn]
+        s.rigid.force = -(target - p_rn).sum(axis=0) / dt
     if s.damping > 0.0 and s.time < s.damping_end:
         boundary.local_damping(f, s.v_old, s.damping)
     p = s.mass[:, None] * s.v_old + dt * f
     boundary.apply_constraints(s.constraints, s.time, p)
     if s.rigid is not None:
-        rn = s.rigid_nodes
-        target = s.mass[rn, None] * s.rigid_v[None, :]
-        # force the body exerts on the covered nodes; the material pushes back with -sum
-        s.rigid.force = -(target - p[rn]).sum(axis=0) / dt
         p[rn] = target
     v = np.zeros_like(p)
     a = s.active
     v[a] = p[a] / s.mass[a, None]
+    if s.rigid is not None:
+        v[s.rigid_nodes] = s.rigid_v  # also on covered nodes without material
     s.v_new = v
 
 

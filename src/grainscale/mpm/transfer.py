@@ -259,19 +259,23 @@ def g2p_kernel(vold, vnew, base, w, nodes, ns, dt, flip, lo, hi, x, v, vmax_out,
         nout_out[c] = nout
 
 
-@njit(cache=True, fastmath=True)
-def mark_nodes_kernel(base, w, nodes, ns, tol, mark):
-    """mark[I] = True for every node with a weight > tol from any of the given points."""
-    nx = nodes[0]
-    ny = nodes[1]
-    for p in range(base.shape[0]):
-        for k in range(ns):
-            iz = base[p, 2] + k
-            for j in range(ns):
-                iy = base[p, 1] + j
-                for i in range(ns):
-                    if w[p, 0, i] * w[p, 1, j] * w[p, 2, k] > tol:
-                        mark[base[p, 0] + i + nx * (iy + ny * iz)] = True
+@njit(cache=True)
+def mark_covered_nodes_kernel(x, lp, origin, h, cells, mark):
+    """mark[I] = True for every node inside or on the surface of a point's domain
+    |x_I - x_p| <= l_p per axis (a relative tolerance of 1e-9 absorbs round-off)."""
+    nx = cells[0] + 1
+    ny = cells[1] + 1
+    lo = np.empty(3, dtype=np.int64)
+    hi = np.empty(3, dtype=np.int64)
+    for p in range(x.shape[0]):
+        for a in range(3):
+            tol = 1e-9 * h[a]
+            lo[a] = max(int(np.ceil((x[p, a] - lp[p] - tol - origin[a]) / h[a])), 0)
+            hi[a] = min(int(np.floor((x[p, a] + lp[p] + tol - origin[a]) / h[a])), cells[a])
+        for k in range(lo[2], hi[2] + 1):
+            for j in range(lo[1], hi[1] + 1):
+                for i in range(lo[0], hi[0] + 1):
+                    mark[i + nx * (j + ny * k)] = True
 
 
 class Transfer:
