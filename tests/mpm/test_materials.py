@@ -75,7 +75,7 @@ def _drained_triaxial(mat, confining=1e5, steps=400, d_axial=2e-4):
     stress = np.array([-confining * np.eye(3)])
     path = []
     for _ in range(steps):
-        def trial(de_lat, commit=False):
+        def trial(de_lat, commit=False, stress=stress):
             dH = np.diag([de_lat, de_lat, -d_axial])[None]
             s = stress.copy()
             st = mat.state()
