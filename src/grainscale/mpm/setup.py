@@ -23,7 +23,30 @@ from grainscale.mpm.step import MPMState
 AXES = {"x": 0, "y": 1, "z": 2}
 
 
+def _check_extent(grid: Grid, lo, hi, key: str) -> None:
+    """A filled shape must lie inside the grid (filling never silently clips it)."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    tol = 1e-9 * grid.cell_size
+    if np.any(lo < grid.origin - tol) or np.any(hi > grid.upper + tol):
+        raise ConfigError(
+            f"{key}: extends from {lo.tolist()} to {hi.tolist()}, outside the grid; valid "
+            f"range {grid.origin.tolist()} .. {grid.upper.tolist()} "
+            "(grid.origin .. grid.origin + grid.cells * grid.cell_size)")
+
+
+def _shape_extent(shape) -> tuple[np.ndarray, np.ndarray]:
+    if shape.shape == "box":
+        return np.asarray(shape.lo), np.asarray(shape.hi)
+    c = np.asarray(shape.center, dtype=float)
+    lo, hi = c - shape.radius, c + shape.radius
+    ax = AXES[shape.axis]
+    lo[ax], hi[ax] = c[ax], c[ax] + shape.height
+    return lo, hi
+
+
 def _body_points(grid: Grid, body, i: int, case_dir: Path):
+    if body.shape != "file":
+        _check_extent(grid, *_shape_extent(body), f"bodies[{i}]")
     if body.shape == "box":
         if any(h <= l for l, h in zip(body.lo, body.hi, strict=True)):
             raise ConfigError(f"bodies[{i}].hi = {list(body.hi)}: must exceed lo = "
@@ -113,6 +136,7 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
     rigid = None
     if case.rigid is not None:
         r = case.rigid
+        _check_extent(grid, *_shape_extent(r), "rigid")
         if r.shape == "box":
             x, vol = fill_box(grid, r.lo, r.hi, r.points_per_cell)
         else:
