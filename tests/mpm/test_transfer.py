@@ -60,8 +60,8 @@ def test_pic_transfer_reproduces_uniform_velocity():
 
 def _threaded_run(n_threads):
     numba.set_num_threads(n_threads)
-    grid = Grid.make([0.0, 0.0, 0.0], 0.05, [12, 12, 9])
-    s = elastic_box(grid, [0.0, 0.0, 0.0], [0.5, 0.5, 0.35], n=2, E=1e5,
+    grid = Grid.make([0.0, 0.0, 0.0], 0.05, [14, 14, 9])
+    s = elastic_box(grid, [0.0, 0.0, 0.0], [0.6, 0.6, 0.35], n=2, E=1e5,
                     gravity=np.array([0.0, 0.0, -9.81]), n_threads=n_threads)
     assert s.points.n > 3 * 2048  # several chunks, so two threads really split the work
     mat = MohrCoulomb("mc", s.points.n, density=1000.0, youngs_modulus=1e5, poisson_ratio=0.3,
@@ -69,8 +69,8 @@ def _threaded_run(n_threads):
     s.materials = [mat]
     s.constraints = rollers(grid, ["x-", "y-"]) + [
         boundary.constraint(boundary.face_nodes(grid, "z-"), "fixed", None)]
-    s.tractions = [boundary.make_traction(s.points.x, s.points.vol0, [0.45, 0, 0],
-                                          [0.5, 0.5, 0.35], [-500.0, 0.0, 0.0], "x+")]
+    s.tractions = [boundary.make_traction(s.points.x, s.points.vol0, [0.575, 0, 0],
+                                          [0.6, 0.6, 0.35], [-500.0, 0.0, 0.0], "x+")]
     s.damping = 0.3
     for _ in range(15):
         step(s, 0.5 * s.stable_dt())

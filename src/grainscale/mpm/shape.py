@@ -22,11 +22,10 @@ everywhere inside the grid (the boundary node then stands for the wall).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from grainscale.mpm.grid import Grid
-
-CHUNK = 2048  # points per work item; fixed so results do not depend on the thread count
+from grainscale.mpm.parallel import CHUNK, parallel_for
 
 GIMP = "GIMP"
 LINEAR = "linear"
@@ -52,40 +51,52 @@ def _gimp_1d(r, h, lp):
     return 0.0, 0.0
 
 
-@njit(cache=True, fastmath=True, parallel=True)
+@njit(cache=True, fastmath=True, inline="always")
+def _evaluate_point(p, x, origin, h, cells, lp, ns, base, w, dw):
+    for a in range(3):
+        ha = h[a]
+        l = lp[p] if ns == 3 else 0.0
+        xi = (x[p, a] - origin[a]) / ha
+        # first node whose support (|r| < h + l) can contain the point
+        if ns == 2:
+            i0 = int(np.floor(xi))
+        else:
+            i0 = int(np.floor(xi - 1.0 - l / ha)) + 1
+        b = min(max(i0, 0), cells[a] + 1 - ns)
+        base[p, a] = b
+        for k in range(3):
+            w[p, a, k] = 0.0
+            dw[p, a, k] = 0.0
+        for k in range(ns):
+            i = i0 + k
+            s, g = _gimp_1d(x[p, a] - (origin[a] + i * ha), ha, l)
+            slot = min(max(i, 0), cells[a]) - b  # fold missing nodes onto the wall
+            w[p, a, slot] += s
+            dw[p, a, slot] += g
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def _evaluate_task(t, nt, x, origin, h, cells, lp, ns, base, w, dw):
+    P = x.shape[0]
+    for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
+        for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
+            _evaluate_point(p, x, origin, h, cells, lp, ns, base, w, dw)
+
+
 def evaluate_kernel(x, origin, h, cells, lp, ns, base, w, dw):
     """Fill base (P,3) int64, w and dw (P,3,3) for points x (P,3) with half-widths lp (P,)."""
-    P = x.shape[0]
-    nchunks = (P + CHUNK - 1) // CHUNK
-    for c in prange(nchunks):
-        for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
-            for a in range(3):
-                ha = h[a]
-                l = lp[p] if ns == 3 else 0.0
-                xi = (x[p, a] - origin[a]) / ha
-                # first node whose support (|r| < h + l) can contain the point
-                i0 = int(np.floor(xi - 1.0 - l / ha)) + 1
-                if ns == 2:
-                    i0 = int(np.floor(xi))
-                b = min(max(i0, 0), cells[a] + 1 - ns)
-                base[p, a] = b
-                for k in range(3):
-                    w[p, a, k] = 0.0
-                    dw[p, a, k] = 0.0
-                for k in range(ns):
-                    i = i0 + k
-                    s, g = _gimp_1d(x[p, a] - (origin[a] + i * ha), ha, l)
-                    slot = min(max(i, 0), cells[a]) - b  # fold missing nodes onto the wall
-                    w[p, a, slot] += s
-                    dw[p, a, slot] += g
+    parallel_for(_evaluate_task, x, origin, h, cells, lp, ns, base, w, dw)
 
 
-def evaluate(x: np.ndarray, lp: np.ndarray, grid: Grid, kind: str = GIMP):
-    """Shape functions of all points: returns (base, w, dw) as described above."""
+def evaluate(x: np.ndarray, lp: np.ndarray, grid: Grid, kind: str = GIMP, out=None):
+    """Shape functions of all points: returns (base, w, dw) as described above.
+
+    `out` may pass preallocated (base, w, dw) arrays to fill (no allocation per step).
+    """
     P = x.shape[0]
     ns = stencil_width(kind)
-    base = np.empty((P, 3), dtype=np.int64)
-    w = np.empty((P, 3, 3))
-    dw = np.empty((P, 3, 3))
+    if out is None:
+        out = (np.empty((P, 3), dtype=np.int64), np.empty((P, 3, 3)), np.empty((P, 3, 3)))
+    base, w, dw = out
     evaluate_kernel(x, grid.origin, grid.cell_size, grid.cells, lp, ns, base, w, dw)
     return base, w, dw

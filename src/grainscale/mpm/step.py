@@ -56,6 +56,8 @@ class MPMState:
         self.ns = stencil_width(self.shape)
         self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads)
         self.dH = np.zeros((P, 3, 3))
+        self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
+                          np.zeros((P, 3, 3)))
         self.fext = np.zeros((P, 3))  # N, point forces (none yet: tractions act on nodes)
         self.vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
         self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
@@ -77,7 +79,7 @@ class MPMState:
 # ------------------------------------------------------------------------- stages
 def shape_functions(s: MPMState) -> None:
     """S_Ip and grad S_Ip at the current point positions."""
-    s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape)
+    s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape, out=s.shape_buf)
 
 
 def p2g(s: MPMState) -> None:

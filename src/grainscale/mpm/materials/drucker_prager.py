@@ -19,18 +19,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from grainscale.mpm.materials.base import add_elastic, lame, p_wave_speed, rotate_objective
-from grainscale.mpm.shape import CHUNK
+from grainscale.mpm.parallel import CHUNK, parallel_for
 
 
-@njit(cache=True, fastmath=True, parallel=True)
-def drucker_prager_kernel(dH, stress, eps_p, K, G, M, Mpsi, k, tcut):
+@njit(cache=True, fastmath=True, nogil=True)
+def _drucker_prager_task(t, nt, dH, stress, eps_p, K, G, M, Mpsi, k, tcut):
     P = stress.shape[0]
     nchunks = (P + CHUNK - 1) // CHUNK
     lam = K - 2.0 * G / 3.0
-    for c in prange(nchunks):
+    for c in range(t, nchunks, nt):
         A = np.empty((3, 3))
         B = np.empty((3, 3))
         s = np.empty((3, 3))
@@ -67,6 +67,10 @@ def drucker_prager_kernel(dH, stress, eps_p, K, G, M, Mpsi, k, tcut):
                 for j in range(3):
                     stress[p, i, j] = s[i, j] * scale
                 stress[p, i, i] -= pm
+
+
+def drucker_prager_kernel(dH, stress, eps_p, K, G, M, Mpsi, k, tcut):
+    parallel_for(_drucker_prager_task, dH, stress, eps_p, K, G, M, Mpsi, k, tcut)
 
 
 class DruckerPrager:

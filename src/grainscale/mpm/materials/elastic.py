@@ -8,17 +8,17 @@ orthogonal rotation, so a rigid rotation leaves the stress invariants unchanged.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from grainscale.mpm.materials.base import add_elastic, lame, p_wave_speed, rotate_objective
-from grainscale.mpm.shape import CHUNK
+from grainscale.mpm.parallel import CHUNK, parallel_for
 
 
-@njit(cache=True, fastmath=True, parallel=True)
-def elastic_kernel(dH, stress, lam, G):
+@njit(cache=True, fastmath=True, nogil=True)
+def _elastic_task(t, nt, dH, stress, lam, G):
     P = stress.shape[0]
     nchunks = (P + CHUNK - 1) // CHUNK
-    for c in prange(nchunks):
+    for c in range(t, nchunks, nt):
         A = np.empty((3, 3))
         B = np.empty((3, 3))
         s = np.empty((3, 3))
@@ -28,6 +28,10 @@ def elastic_kernel(dH, stress, lam, G):
             for i in range(3):
                 for j in range(3):
                     stress[p, i, j] = s[i, j]
+
+
+def elastic_kernel(dH, stress, lam, G):
+    parallel_for(_elastic_task, dH, stress, lam, G)
 
 
 class LinearElastic:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from grainscale.mpm.materials.base import (
     add_elastic,
@@ -32,7 +32,7 @@ from grainscale.mpm.materials.base import (
     p_wave_speed,
     rotate_objective,
 )
-from grainscale.mpm.shape import CHUNK
+from grainscale.mpm.parallel import CHUNK, parallel_for
 
 
 @njit(cache=True, fastmath=True)
@@ -90,11 +90,11 @@ def mc_return(s, lam, G, sphi, cphi, spsi, coh, tcut, out):
     return dl
 
 
-@njit(cache=True, fastmath=True, parallel=True)
-def mohr_coulomb_kernel(dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut):
+@njit(cache=True, fastmath=True, nogil=True)
+def _mohr_coulomb_task(t, nt, dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut):
     P = stress.shape[0]
     nchunks = (P + CHUNK - 1) // CHUNK
-    for c in prange(nchunks):
+    for c in range(t, nchunks, nt):
         A = np.empty((3, 3))
         B = np.empty((3, 3))
         s = np.empty((3, 3))
@@ -112,6 +112,10 @@ def mohr_coulomb_kernel(dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut):
             for i in range(3):
                 for j in range(3):
                     stress[p, i, j] = s[i, j]
+
+
+def mohr_coulomb_kernel(dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut):
+    parallel_for(_mohr_coulomb_task, dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut)
 
 
 class MohrCoulomb:
