@@ -35,7 +35,7 @@ CHECKPOINT = "checkpoint.h5"
 def history_values(case: Case, s: MPMState) -> dict[str, float]:
     """Every history quantity available for this case at the current state."""
     pts = s.points
-    out = {"step": s.step, "time": s.time, "dt": getattr(s, "last_dt", 0.0),
+    out = {"step": s.step, "time": s.time, "dt": s.last_dt,
            "kinetic_energy": kinetic_energy(pts)}
     col = case.output.column
     if col is not None:
@@ -185,7 +185,6 @@ def run_case(case_path, out, *, max_steps: int | None = None,
             else:
                 dt = limit
             dt = min(dt, t_end - s.time)
-            s.last_dt = dt
             step(s, dt)
             steps_run += 1
             bar.update(dt)

@@ -50,6 +50,7 @@ class MPMState:
     n_threads: int = 1
     # --- scratch, rebuilt every step -------------------------------------------------
     vmax: float = 0.0  # m/s, largest point speed after the last step
+    last_dt: float = 0.0  # s, the last step taken
 
     def __post_init__(self):
         P = self.points.n
@@ -211,6 +212,7 @@ def step(s: MPMState, dt: float) -> None:
     if s.scheme != "USF":
         update_stress(s, s.v_new, dt)
     advance_rigid(s, dt)
+    s.last_dt = dt
     s.time += dt
     s.step += 1
 
