@@ -87,3 +87,26 @@ def test_same_result_with_one_and_two_threads():
         assert np.array_equal(arr, getattr(b.points, k)), k
     assert np.array_equal(a.materials[0].eps_p, b.materials[0].eps_p)
     assert a.materials[0].eps_p.max() > 0  # plasticity was exercised
+
+
+def test_nodal_sums_do_not_depend_on_point_order():
+    """Fixed-point accumulation: permuting the points gives bitwise identical nodal sums
+    (the property the MPI issue relies on for rank-count independence)."""
+    s = _random_state()
+    s.points.stress[:] = np.random.default_rng(6).normal(size=s.points.stress.shape) * 1e3
+    s.gravity = np.array([0.0, 0.0, -9.81])
+    shape_functions(s)
+    p2g(s)
+    from grainscale.mpm.step import nodal_forces
+
+    nodal_forces(s)
+    m1, p1, f1 = s.mass.copy(), s.momentum.copy(), s.force.copy()
+    perm = np.random.default_rng(7).permutation(s.points.n)
+    for k, a in s.points.arrays().items():
+        setattr(s.points, k, np.ascontiguousarray(a[perm]))
+    shape_functions(s)
+    p2g(s)
+    nodal_forces(s)
+    assert np.array_equal(m1, s.mass)
+    assert np.array_equal(p1, s.momentum)
+    assert np.array_equal(f1, s.force)

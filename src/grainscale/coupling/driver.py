@@ -2,7 +2,8 @@
 
 Outputs in --out: `case.resolved.toml` (every default filled in, package version),
 `history.csv` (a row every output.interval, plus a final row when the run stops),
-`frames/frame_NNNNN.vtu` + `frames.pvd`, and `checkpoint.h5` every N steps (and at the
+`frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
+for a rigid body), and `checkpoint.h5` every N steps (and at the
 end of the run) when checkpointing is on. `--resume` continues from checkpoint.h5:
 history rows and frames written after it are dropped, so the continued run writes the
 same history.csv as an uninterrupted one.
@@ -133,10 +134,12 @@ def run_case(case_path, out, *, max_steps: int | None = None,
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
         history = History(out / "history.csv", columns, case.title, resume_rows=n_rows)
         pvd = PVDSeries.load(out / "frames.pvd", keep=n_frames)
+        rigid_pvd = PVDSeries.load(out / "rigid.pvd", keep=n_frames)
     else:
         n_rows = n_frames = 0
         history = History(out / "history.csv", columns, case.title)
         pvd = PVDSeries(out / "frames.pvd")
+        rigid_pvd = PVDSeries(out / "rigid.pvd")
 
     def write_row():
         history.write(history_values(case, s))
@@ -145,6 +148,11 @@ def run_case(case_path, out, *, max_steps: int | None = None,
         f = out / "frames" / f"frame_{k:05d}.vtu"
         write_points_vtu(f, s.points.x, point_fields(s))
         pvd.add(s.time, f)
+        if s.rigid is not None:  # the body's points as their own series
+            f = out / "frames" / f"rigid_{k:05d}.vtu"
+            v = np.tile(s.rigid.velocity_at(s.time), (len(s.rigid.x), 1))
+            write_points_vtu(f, s.rigid.x, {"velocity": v})
+            rigid_pvd.add(s.time, f)
 
     def due(n_done: int, interval: float) -> bool:
         return s.time >= t0 + n_done * interval - 1e-9 * interval
