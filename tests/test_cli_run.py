@@ -134,3 +134,18 @@ def test_resume_without_checkpoint_is_an_error(tmp_path, capsys):
     case = _case(tmp_path)
     assert main(["run", str(case), "--out", str(tmp_path / "o"), "--resume", "--quiet"]) == 2
     assert "checkpoint" in capsys.readouterr().err
+
+
+def test_point_leaving_the_grid_stops_the_run_cleanly(tmp_path, capsys):
+    """No wall at x+: a block thrown at it leaves the grid; exit code 1, rows intact."""
+    text = textwrap.dedent(CASE).replace('lo = [0.0, 0.0, 0.0]\nhi = [0.2, 0.2, 0.1]',
+                                         'lo = [0.0, 0.0, 0.0]\nhi = [0.2, 0.2, 0.1]\n'
+                                         'velocity = [5.0, 0.0, 0.0]')
+    assert "velocity = [5.0" in text
+    p = tmp_path / "throw.toml"
+    p.write_text(text)
+    out = tmp_path / "o"
+    assert main(["run", str(p), "--out", str(out), "--quiet"]) == 1
+    assert "left the grid" in capsys.readouterr().err
+    rows = _rows(out / "history.csv")
+    assert len(rows) >= 2 and all(len(r.split(",")) == 5 for r in rows)
