@@ -86,3 +86,17 @@ def test_boundary_needs_face_or_box(tmp_path):
     text = GOOD + '\n[[boundaries]]\ntype = "fixed"\n'
     with pytest.raises(ConfigError, match="boundaries\\[0\\].*exactly one of"):
         _load(tmp_path, text)
+
+
+def test_clip_to_grid_keeps_the_quarter(tmp_path):
+    """A cylinder centred on the grid corner: an error unless clipped, then a quarter."""
+    cyl = ('shape = "cylinder"\nmaterial = "soil"\ncenter = [0.0, 0.0, 0.0]\nradius = 0.1\n'
+           'height = 0.1')
+    text = GOOD.replace('shape = "box"\nmaterial = "soil"\nlo = [0.0, 0.0, 0.0]\n'
+                        'hi = [0.1, 0.1, 0.1]', cyl)
+    with pytest.raises(ConfigError, match="clip_to_grid"):
+        _load(tmp_path, text)
+    s = _load(tmp_path, text.replace("height = 0.1", "height = 0.1\nclip_to_grid = true"))
+    import numpy as np
+
+    np.testing.assert_allclose(s.points.vol0.sum(), np.pi * 0.1**2 * 0.1 / 4, rtol=0.1)

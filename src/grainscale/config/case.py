@@ -91,6 +91,7 @@ class _Body(StrictModel):
     material: str  # name of a [materials.NAME] table
     points_per_cell: Annotated[int, Field(ge=1, le=8)] = 2  # n: n^3 points per cell
     velocity: Vec3 = (0.0, 0.0, 0.0)  # m/s, initial
+    clip_to_grid: bool = False  # keep only the part inside the grid (symmetry models)
 
 
 class BoxBody(_Body):
@@ -153,6 +154,7 @@ class DampingCfg(StrictModel):
 
 class _Rigid(StrictModel):
     points_per_cell: Annotated[int, Field(ge=1, le=8)] = 2
+    clip_to_grid: bool = False  # keep only the part inside the grid (symmetry models)
     velocity: Vec3  # m/s, reached after ramp_time
     ramp_time: NonNeg = 0.0  # s
     start_time: float | None = None  # s; default time.start

@@ -31,7 +31,8 @@ def _check_extent(grid: Grid, lo, hi, key: str) -> None:
         raise ConfigError(
             f"{key}: extends from {lo.tolist()} to {hi.tolist()}, outside the grid; valid "
             f"range {grid.origin.tolist()} .. {grid.upper.tolist()} "
-            "(grid.origin .. grid.origin + grid.cells * grid.cell_size)")
+            "(grid.origin .. grid.origin + grid.cells * grid.cell_size); set "
+            "clip_to_grid = true to keep only the part inside (symmetry planes)")
 
 
 def _shape_extent(shape) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +46,7 @@ def _shape_extent(shape) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _body_points(grid: Grid, body, i: int, case_dir: Path):
-    if body.shape != "file":
+    if body.shape != "file" and not body.clip_to_grid:
         _check_extent(grid, *_shape_extent(body), f"bodies[{i}]")
     if body.shape == "box":
         if any(h <= l for l, h in zip(body.lo, body.hi, strict=True)):
@@ -136,7 +137,8 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
     rigid = None
     if case.rigid is not None:
         r = case.rigid
-        _check_extent(grid, *_shape_extent(r), "rigid")
+        if not r.clip_to_grid:
+            _check_extent(grid, *_shape_extent(r), "rigid")
         if r.shape == "box":
             x, vol = fill_box(grid, r.lo, r.hi, r.points_per_cell)
         else:
