@@ -55,3 +55,24 @@ def test_rigid_plate_pushing_elastic_block_matches_oedometer_stiffness():
     expected = M * a * a * d / H
     np.testing.assert_allclose(s.rigid.force[2], expected, rtol=0.02)
     assert abs(s.rigid.force[0]) < 1e-6 * expected and abs(s.rigid.force[1]) < 1e-6 * expected
+
+
+def test_musl_drucker_prager_indentation_runs_and_yields():
+    """The other code paths together (MUSL, PIC blend, Drucker-Prager, rigid body): a
+    punch into a cohesionless layer under gravity yields below the punch, stays finite,
+    and the layer pushes back on the punch."""
+    from grainscale.mpm.materials import DruckerPrager
+
+    grid = Grid.make([0, 0, 0], 0.05, [8, 4, 6])
+    s = elastic_box(grid, [0, 0, 0], [0.4, 0.2, 0.2], n=2, scheme="MUSL", flip=0.9,
+                    gravity=np.array([0.0, 0.0, -9.81]))
+    s.materials = [DruckerPrager("dp", s.points.n, density=1000.0, youngs_modulus=1e6,
+                                 poisson_ratio=0.3, friction_angle=30.0)]
+    s.constraints = rollers(grid, ["x-", "x+", "y-", "y+"]) + [
+        boundary.constraint(boundary.face_nodes(grid, "z-"), "fixed", None)]
+    s.rigid = _plate(grid, [0.0, 0.0, 0.2], [0.1, 0.2, 0.25], [0, 0, -0.05], ramp=0.01)
+    run(s, 0.15)
+    assert np.all(np.isfinite(s.points.stress)) and np.all(np.isfinite(s.points.x))
+    under = s.points.x0[:, 0] < 0.1
+    assert s.materials[0].eps_p[under].max() > 0
+    assert s.rigid.force[2] > 0
