@@ -60,7 +60,7 @@ ramp_time = 0.01
 [output]
 interval = 0.004
 checkpoint_every = 0
-history = ["time", "kinetic_energy", "rigid_fz", "rigid_depth"]
+history = ["time", "kinetic_energy", "rigid_fz", "rigid_depth", "force"]
 """
 
 
@@ -79,12 +79,13 @@ def test_run_writes_outputs(tmp_path):
     out = tmp_path / "out"
     assert main(["run", str(case), "--out", str(out), "--quiet"]) == 0
     rows = _rows(out / "history.csv")
-    assert rows[0] == "step,time,kinetic_energy,rigid_fz,rigid_depth"
+    assert rows[0] == "step,time,kinetic_energy,rigid_fz,rigid_depth,force"
     last = rows[-1].split(",")
     assert abs(float(last[1]) - 0.03) < 1e-12  # ran to time.end
     assert float(last[3]) > 0  # the soil pushes the plate up
     # from time.start = -0.01: ramp over 0.01 s, then constant (midpoint rule at the kink)
     assert abs(float(last[4]) - 0.05 * (0.04 - 0.005)) < 1e-6
+    assert float(last[5]) == float(last[3])  # downward motion: resistance = +f_z
     assert (out / "case.resolved.toml").read_text().count("grainscale_version") == 1
     assert "flip = 0.99" in (out / "case.resolved.toml").read_text()  # defaults filled in
     frames = sorted((out / "frames").glob("frame_*.vtu"))
@@ -92,7 +93,7 @@ def test_run_writes_outputs(tmp_path):
     import meshio
 
     m = meshio.read(frames[-1])
-    for k in ("velocity", "displacement", "stress", "p", "q", "eps_v", "material",
+    for k in ("position", "velocity", "displacement", "stress", "p", "q", "eps_v", "material",
               "plastic_strain"):
         assert k in m.point_data, k
     assert m.point_data["stress"].shape[1] == 9
@@ -148,4 +149,4 @@ def test_point_leaving_the_grid_stops_the_run_cleanly(tmp_path, capsys):
     assert main(["run", str(p), "--out", str(out), "--quiet"]) == 1
     assert "left the grid" in capsys.readouterr().err
     rows = _rows(out / "history.csv")
-    assert len(rows) >= 2 and all(len(r.split(",")) == 5 for r in rows)
+    assert len(rows) >= 2 and all(len(r.split(",")) == 6 for r in rows)

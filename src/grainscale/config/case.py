@@ -190,7 +190,7 @@ class ColumnCfg(StrictModel):
 
 HISTORY_ALWAYS = ("time", "dt", "kinetic_energy")
 HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height")
-HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth")
+HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force")
 
 
 class OutputCfg(StrictModel):

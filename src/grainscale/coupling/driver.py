@@ -54,17 +54,20 @@ def history_values(case: Case, s: MPMState) -> dict[str, float]:
         f = s.rigid.force
         v = s.rigid.velocity
         n = v / np.linalg.norm(v) if np.any(v) else np.zeros(3)
-        out.update(rigid_fx=f[0], rigid_fy=f[1], rigid_fz=f[2],
-                   rigid_depth=float(np.dot(s.rigid.displacement, n)))
+        depth = float(np.dot(s.rigid.displacement, n))
+        out.update(rigid_fx=f[0], rigid_fy=f[1], rigid_fz=f[2], rigid_depth=depth,
+                   depth=depth, force=-float(np.dot(f, n)))  # resistance to the motion
     return out
 
 
 def point_fields(s: MPMState) -> dict[str, np.ndarray]:
-    """Per-point output: velocity, displacement, stress, p, q, eps_v = ln(V/V0), material."""
+    """Per-point output: position, velocity, displacement, stress, p, q,
+    eps_v = ln(V/V0), material index, and the materials' own fields."""
     pts = s.points
     p, q = p_q(pts.stress)
-    fields = {"velocity": pts.v, "displacement": pts.x - pts.x0, "stress": pts.stress,
-              "p": p, "q": q, "eps_v": np.log(pts.vol / pts.vol0), "material": pts.mat}
+    fields = {"position": pts.x, "velocity": pts.v, "displacement": pts.x - pts.x0,
+              "stress": pts.stress, "p": p, "q": q, "eps_v": np.log(pts.vol / pts.vol0),
+              "material": pts.mat}
     for mat, ids in zip(s.materials, s.mat_points, strict=True):
         for k, a in mat.point_fields().items():
             if ids is None:

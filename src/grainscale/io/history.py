@@ -11,13 +11,15 @@ from pathlib import Path
 UNITS = {
     "step": "-", "time": "s", "dt": "s", "kinetic_energy": "J", "t_over_tc": "-",
     "runout_ratio": "-", "height_ratio": "-", "front": "m", "column_height": "m",
-    "rigid_fx": "N", "rigid_fy": "N", "rigid_fz": "N", "rigid_depth": "m",
+    "rigid_fx": "N", "rigid_fy": "N", "rigid_fz": "N", "rigid_depth": "m", "depth": "m",
+    "force": "N",
 }
 
 CONVENTION = ("SI units. Stresses: tension positive internally; p = -tr(sigma)/3 and "
               "q = sqrt(3/2 s:s) are compression positive. rigid_f*: force of the "
               "material on the rigid body. rigid_depth: body displacement along its "
-              "prescribed velocity. runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i.")
+              "prescribed velocity (= depth); force: its resistance, -f . v/|v|. "
+              "runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i.")
 
 
 class History:
