@@ -1,0 +1,251 @@
+"""Pydantic models of an MPM case file (TOML). Every table rejects unknown keys.
+
+See docs/case-files.md for the reference of every key, with units. Cross-table checks
+that need more than one table (a body's material exists, history columns are available,
+points inside the grid, dt below the CFL limit) are done by `check_case` and by the
+solver set-up, which raise ConfigError naming the key, the value and the valid range.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from grainscale.config.base import ConfigError, StrictModel, load_toml
+
+Vec3 = tuple[float, float, float]
+Pos = Annotated[float, Field(gt=0)]
+NonNeg = Annotated[float, Field(ge=0)]
+Axis = Literal["x", "y", "z"]
+Face = Literal["x-", "x+", "y-", "y+", "z-", "z+"]
+
+
+class GridCfg(StrictModel):
+    origin: Vec3 = (0.0, 0.0, 0.0)  # m, position of the first node
+    cell_size: Pos | tuple[Pos, Pos, Pos]  # m, one value (cubic cells) or one per axis
+    cells: tuple[Annotated[int, Field(ge=1)], Annotated[int, Field(ge=1)],
+                 Annotated[int, Field(ge=1)]]  # cells per axis
+
+
+class SolverCfg(StrictModel):
+    scheme: Literal["USF", "USL", "MUSL"] = "USF"
+    shape: Literal["GIMP", "linear"] = "GIMP"
+    flip: Annotated[float, Field(ge=0, le=1)] = 0.99  # FLIP fraction (0 = PIC)
+    cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
+    dt: Pos | None = None  # s; fixed step (checked against the CFL limit); default: CFL
+    gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
+    threads: Annotated[int, Field(ge=0)] = 0  # 0: all available
+
+
+class TimeCfg(StrictModel):
+    start: float = 0.0  # s; negative to run an initialisation stage before t = 0
+    end: float  # s
+
+    @model_validator(mode="after")
+    def _order(self):
+        if not self.end > self.start:
+            raise ValueError(f"time.end = {self.end} must be > time.start = {self.start}")
+        return self
+
+
+class _Elastic(StrictModel):
+    density: Pos  # kg/m^3
+    youngs_modulus: Pos  # Pa
+    poisson_ratio: Annotated[float, Field(ge=0, lt=0.5)]
+
+
+class LinearElasticCfg(_Elastic):
+    type: Literal["linear_elastic"]
+
+
+class _Frictional(_Elastic):
+    friction_angle: Annotated[float, Field(gt=0, lt=90)]  # deg
+    dilation_angle: Annotated[float, Field(ge=0, lt=90)] = 0.0  # deg, <= friction angle
+    cohesion: NonNeg = 0.0  # Pa
+    tension_cutoff: NonNeg = 0.0  # Pa (capped at the apex tension)
+
+    @field_validator("dilation_angle")
+    @classmethod
+    def _psi(cls, v, info):
+        phi = info.data.get("friction_angle")
+        if phi is not None and v > phi:
+            raise ValueError(f"must be <= friction_angle ({phi})")
+        return v
+
+
+class MohrCoulombCfg(_Frictional):
+    type: Literal["mohr_coulomb"]
+
+
+class DruckerPragerCfg(_Frictional):
+    type: Literal["drucker_prager"]
+
+
+MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg,
+                        Field(discriminator="type")]
+
+
+class _Body(StrictModel):
+    material: str  # name of a [materials.NAME] table
+    points_per_cell: Annotated[int, Field(ge=1, le=8)] = 2  # n: n^3 points per cell
+    velocity: Vec3 = (0.0, 0.0, 0.0)  # m/s, initial
+    clip_to_grid: bool = False  # keep only the part inside the grid (symmetry models)
+
+
+class BoxBody(_Body):
+    shape: Literal["box"]
+    lo: Vec3  # m
+    hi: Vec3  # m
+
+
+class CylinderBody(_Body):
+    shape: Literal["cylinder"]
+    center: Vec3  # m, centre of the base disc
+    radius: Pos  # m
+    height: Pos  # m, along +axis
+    axis: Axis = "z"
+
+
+class FileBody(_Body):
+    shape: Literal["file"]
+    path: str  # text file, one `x y z volume` per line; relative to the case file
+
+
+BodyCfg = Annotated[BoxBody | CylinderBody | FileBody, Field(discriminator="shape")]
+
+
+class NodeBoxCfg(StrictModel):
+    lo: Vec3
+    hi: Vec3
+
+
+class BoundaryCfg(StrictModel):
+    type: Literal["fixed", "roller"]
+    face: Face | None = None  # a grid face ...
+    box: NodeBoxCfg | None = None  # ... or the nodes inside a box
+    normal: Axis | None = None  # roller in a box: the constrained component
+    end_time: float | None = None  # s; removed at this time (default: never)
+
+    @model_validator(mode="after")
+    def _where(self):
+        if (self.face is None) == (self.box is None):
+            raise ValueError("give exactly one of `face` or `box`")
+        if self.type == "roller" and self.box is not None and self.normal is None:
+            raise ValueError("a roller on a box of nodes needs `normal` ('x', 'y' or 'z')")
+        return self
+
+
+class TractionCfg(StrictModel):
+    lo: Vec3  # m, box selecting the loaded points (their centres)
+    hi: Vec3
+    traction: Vec3  # Pa
+    surface: Face  # side of the points carrying the load (outward normal), e.g. "x+"
+    ramp_time: NonNeg = 0.0  # s, linear ramp from start_time
+    start_time: float | None = None  # s; default time.start
+    end_time: float | None = None  # s; default never
+
+
+class DampingCfg(StrictModel):
+    alpha: Annotated[float, Field(ge=0, lt=1)] = 0.0  # Cundall local damping coefficient
+    end_time: float | None = None  # s; default never
+
+
+class _Rigid(StrictModel):
+    points_per_cell: Annotated[int, Field(ge=1, le=8)] = 2
+    clip_to_grid: bool = False  # keep only the part inside the grid (symmetry models)
+    velocity: Vec3  # m/s, reached after ramp_time
+    ramp_time: NonNeg = 0.0  # s
+    start_time: float | None = None  # s; default time.start
+
+
+class RigidBoxCfg(_Rigid):
+    shape: Literal["box"]
+    lo: Vec3
+    hi: Vec3
+
+
+class RigidCylinderCfg(_Rigid):
+    shape: Literal["cylinder"]
+    center: Vec3
+    radius: Pos
+    height: Pos
+    axis: Axis = "z"
+
+
+RigidCfg = Annotated[RigidBoxCfg | RigidCylinderCfg, Field(discriminator="shape")]
+
+
+class ColumnCfg(StrictModel):
+    """Geometry of a column collapse, for the runout columns of history.csv."""
+    length: Pos  # m, initial length L_i
+    height: Pos  # m, initial height H_i
+    wall: float = 0.0  # m, coordinate of the back wall along flow_axis
+    base: float = 0.0  # m, coordinate of the floor along up_axis
+    flow_axis: Axis = "x"
+    up_axis: Axis = "z"
+    front_quantile: Annotated[float, Field(gt=0, le=1)] = 1.0  # 1: outermost point edge
+
+
+HISTORY_ALWAYS = ("time", "dt", "kinetic_energy")
+HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height")
+HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force")
+
+
+class OutputCfg(StrictModel):
+    interval: Pos  # s, between history rows (and frames)
+    frame_interval: Pos | None = None  # s; default: interval
+    frames: bool = True  # write VTK frames
+    checkpoint_every: Annotated[int, Field(ge=0)] = 0  # steps; 0: no checkpoints
+    history: list[str] = ["time", "kinetic_energy"]  # columns after `step`
+    column: ColumnCfg | None = None
+
+
+class Case(StrictModel):
+    title: str = ""
+    grid: GridCfg
+    solver: SolverCfg = SolverCfg()
+    time: TimeCfg
+    materials: dict[str, MaterialCfg]
+    bodies: Annotated[list[BodyCfg], Field(min_length=1)]
+    boundaries: list[BoundaryCfg] = []
+    tractions: list[TractionCfg] = []
+    damping: DampingCfg = DampingCfg()
+    rigid: RigidCfg | None = None
+    output: OutputCfg
+
+
+def check_case(case: Case) -> None:
+    """Cross-table checks; ConfigError names key, value and what is valid."""
+    names = sorted(case.materials)
+    for i, b in enumerate(case.bodies):
+        if b.material not in case.materials:
+            raise ConfigError(f"bodies[{i}].material = {b.material!r}: no such material; "
+                              f"defined: {names}")
+    if case.solver.shape == "GIMP" and min(case.grid.cells) < 2:
+        raise ConfigError(f"grid.cells = {list(case.grid.cells)}: GIMP needs >= 2 cells "
+                          "per axis (or use solver.shape = 'linear')")
+    valid = list(HISTORY_ALWAYS)
+    if case.output.column is not None:
+        valid += HISTORY_COLUMN
+    if case.rigid is not None:
+        valid += HISTORY_RIGID
+    for i, c in enumerate(case.output.history):
+        if c not in valid:
+            raise ConfigError(f"output.history[{i}] = {c!r}: not an available column; valid: "
+                              f"{valid} (runout columns need [output.column], rigid_* need "
+                              "[rigid])")
+    if "t_over_tc" in case.output.history and not any(case.solver.gravity):
+        raise ConfigError("output.history contains 't_over_tc' but solver.gravity = "
+                          f"{list(case.solver.gravity)}: tau_c = sqrt(H/g) needs gravity")
+    for k in ("start", "end"):
+        if not math.isfinite(getattr(case.time, k)):
+            raise ConfigError(f"time.{k} = {getattr(case.time, k)}: must be finite")
+
+
+def load_case(path) -> Case:
+    """Read, validate and cross-check a case file."""
+    case = load_toml(path, Case)
+    check_case(case)
+    return case

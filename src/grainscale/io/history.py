@@ -1,0 +1,62 @@
+"""history.csv: one row per output interval, named columns, a commented header.
+
+The header states units and the sign convention. Rows are appended and flushed one at a
+time, so a run that stops (or fails) keeps every row written so far intact.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+UNITS = {
+    "step": "-", "time": "s", "dt": "s", "kinetic_energy": "J", "t_over_tc": "-",
+    "runout_ratio": "-", "height_ratio": "-", "front": "m", "column_height": "m",
+    "rigid_fx": "N", "rigid_fy": "N", "rigid_fz": "N", "rigid_depth": "m", "depth": "m",
+    "force": "N",
+}
+
+CONVENTION = ("SI units. Stresses: tension positive internally; p = -tr(sigma)/3 and "
+              "q = sqrt(3/2 s:s) are compression positive. rigid_f*: force of the "
+              "material on the rigid body. rigid_depth: body displacement along its "
+              "prescribed velocity (= depth); force: its resistance, -f . v/|v|. "
+              "runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i.")
+
+
+class History:
+    """Append-only CSV writer. `resume_rows` keeps that many existing data rows."""
+
+    def __init__(self, path: str | Path, columns: list[str], title: str = "",
+                 resume_rows: int | None = None):
+        self.path = Path(path)
+        self.columns = list(columns)
+        if resume_rows is None:
+            head = [f"# grainscale history: {title}".rstrip(), f"# {CONVENTION}",
+                    "# units: " + ", ".join(f"{c} [{UNITS.get(c, '-')}]" for c in columns),
+                    ",".join(columns)]
+            self.path.write_text("\n".join(head) + "\n")
+            self.rows = 0
+        else:
+            self.truncate(resume_rows)
+        self._f = open(self.path, "a")  # noqa: SIM115 (kept open for the run)
+
+    def truncate(self, n_rows: int) -> None:
+        """Keep the header and the first n_rows data rows (resume)."""
+        lines = self.path.read_text().splitlines(keepends=True)
+        n_head = next(i for i, ln in enumerate(lines) if not ln.startswith("#")) + 1
+        kept = lines[:n_head + n_rows]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text("".join(kept))
+        tmp.replace(self.path)
+        self.rows = len(kept) - n_head
+
+    def write(self, values: dict[str, float]) -> None:
+        row = []
+        for c in self.columns:
+            v = values[c]
+            row.append(str(int(v)) if c == "step" else repr(float(v)))
+        self._f.write(",".join(row) + "\n")
+        self._f.flush()
+        self.rows += 1
+
+    def close(self) -> None:
+        self._f.close()

@@ -1,0 +1,83 @@
+"""ParaView output: point clouds as VTK XML unstructured grids (.vtu) and .pvd series.
+
+Generic: used for MPM material points and reusable for DEM spheres. Files are written to
+a temporary name and moved into place, so a crash never leaves a half-written frame or a
+broken series file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import meshio
+import numpy as np
+
+
+def _atomic_replace(tmp: Path, path: Path) -> None:
+    os.replace(tmp, path)
+
+
+def write_points_vtu(path: str | Path, points: np.ndarray,
+                     point_data: dict[str, np.ndarray]) -> None:
+    """Write points (P,3) with per-point fields as vertex cells to a .vtu file.
+
+    Fields may be (P,), (P,k) or (P,3,3) (tensors are flattened row-major to 9
+    components, which ParaView shows as a tensor).
+    """
+    path = Path(path)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    data = {}
+    for k, v in point_data.items():
+        a = np.asarray(v)
+        if a.ndim == 3:
+            a = a.reshape(a.shape[0], -1)
+        if a.dtype == np.bool_:
+            a = a.astype(np.uint8)
+        data[k] = np.ascontiguousarray(a)
+    cells = [("vertex", np.arange(pts.shape[0], dtype=np.int64).reshape(-1, 1))]
+    tmp = path.with_name(path.name + ".tmp.vtu")
+    meshio.write(tmp, meshio.Mesh(pts, cells, point_data=data), file_format="vtu",
+                 binary=True, compression=None)
+    _atomic_replace(tmp, path)
+
+
+class PVDSeries:
+    """A .pvd collection file listing (time, file) entries, rewritten atomically on add."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.entries: list[tuple[float, str]] = []
+
+    @classmethod
+    def load(cls, path: str | Path, keep: int | None = None) -> PVDSeries:
+        """Read an existing series (keeping its first `keep` entries) to continue it."""
+        import xml.etree.ElementTree as ET
+
+        s = cls(path)
+        if s.path.is_file():
+            root = ET.parse(s.path).getroot()
+            for ds in root.iter("DataSet"):
+                s.entries.append((float(ds.get("timestep")), ds.get("file")))
+        if keep is not None:
+            s.entries = s.entries[:keep]
+            s.write()
+        return s
+
+    def add(self, time: float, file: str | Path) -> None:
+        rel = os.path.relpath(Path(file), self.path.parent)
+        self.entries.append((float(time), rel))
+        self.write()
+
+    def write(self) -> None:
+        lines = ['<?xml version="1.0"?>',
+                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+                 "  <Collection>"]
+        for t, f in self.entries:
+            lines.append(f'    <DataSet timestep="{t!r}" group="" part="0" '
+                         f"file={quoteattr(f)}/>")
+        lines += ["  </Collection>", "</VTKFile>", ""]
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text("\n".join(lines))
+        _atomic_replace(tmp, self.path)

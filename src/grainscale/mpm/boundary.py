@@ -1,0 +1,139 @@
+"""Boundary conditions on grid nodes and on material points.
+
+- Node constraints (Dirichlet): the nodes of a grid face or of a box of nodes have some
+  velocity components held at zero: `fixed` (all three, no-slip) or `roller` (the normal
+  one only, frictionless). A constraint can end at a given time (it is removed for
+  t >= end_time, as the column release of validation case 2).
+- Point tractions (Neumann): a traction vector t (Pa) on the material points selected by
+  a box; each carries the force t * A_p with the tributary area A_p = V0_p^(2/3) (the
+  face of its cubic sub-cell). The surface term of seed Eq. 6, int N_I t dS, is evaluated
+  at the point's surface position x_p + l_p n (n the outward normal of the loaded
+  surface) with linear weights, so the load reaches the nodes of the surface itself and
+  the outermost cell carries the full stress (mapping it from x_p instead leaves a
+  quarter of it on the next node plane in). Nominal traction: the area is not updated.
+- Local non-viscous damping (Cundall): f_I <- f_I - alpha |f_I| sign(v_I) per component,
+  for quasi-static initialisation (geostatic stress), switched off at `end_time`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from grainscale.mpm.grid import Grid
+
+FACES = {"x-": (0, 0), "x+": (0, 1), "y-": (1, 0), "y+": (1, 1), "z-": (2, 0), "z+": (2, 1)}
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+@dataclass
+class NodeConstraint:
+    nodes: np.ndarray  # (n,) int64 node ids
+    mask: np.ndarray  # (3,) bool: components held at zero velocity
+    end_time: float = np.inf  # s; the constraint acts while time < end_time
+
+    def active(self, time: float) -> bool:
+        return time < self.end_time
+
+
+def face_nodes(grid: Grid, face: str) -> np.ndarray:
+    """Node ids of one face of the grid ('x-', 'x+', ...)."""
+    axis, side = FACES[face]
+    idx = np.arange(grid.n_nodes).reshape(tuple(grid.nodes[::-1]))  # [k, j, i]
+    level = 0 if side == 0 else int(grid.cells[axis])
+    sl = [slice(None)] * 3
+    sl[2 - axis] = level
+    return np.ascontiguousarray(idx[tuple(sl)].ravel())
+
+
+def box_nodes(grid: Grid, lo, hi) -> np.ndarray:
+    """Node ids with lo <= x_I <= hi (a tolerance of 1e-6 cell absorbs round-off)."""
+    x = grid.node_positions()
+    tol = 1e-6 * grid.cell_size
+    sel = np.all((x >= np.asarray(lo) - tol) & (x <= np.asarray(hi) + tol), axis=1)
+    return np.flatnonzero(sel).astype(np.int64)
+
+
+def constraint(nodes: np.ndarray, kind: str, normal: int | None,
+               end_time: float = np.inf) -> NodeConstraint:
+    """`fixed`: all components; `roller`: only component `normal` (0, 1 or 2)."""
+    mask = np.zeros(3, dtype=bool)
+    if kind == "fixed":
+        mask[:] = True
+    elif kind == "roller":
+        mask[normal] = True
+    else:
+        raise ValueError(f"unknown constraint type {kind!r}")
+    return NodeConstraint(nodes, mask, end_time)
+
+
+def apply_constraints(constraints: list[NodeConstraint], time: float, a: np.ndarray) -> None:
+    """Zero the constrained components of a nodal vector field a (n_nodes, 3) in place."""
+    for c in constraints:
+        if c.active(time):
+            for comp in np.flatnonzero(c.mask):
+                a[c.nodes, comp] = 0.0
+
+
+def local_damping(f: np.ndarray, v: np.ndarray, alpha: float) -> None:
+    """Cundall's local non-viscous damping, in place: f <- f - alpha |f| sign(v)."""
+    f -= alpha * np.abs(f) * np.sign(v)
+
+
+@dataclass
+class Traction:
+    points: np.ndarray  # (n,) int64 ids of the loaded points
+    force: np.ndarray  # (n, 3) N, full force t * A_p of each point
+    normal: np.ndarray  # (3,) outward unit normal of the loaded surface
+    ramp_time: float = 0.0  # s, linear ramp from start_time
+    start_time: float = 0.0
+    end_time: float = np.inf
+
+    def factor(self, time: float) -> float:
+        if time >= self.end_time or time < self.start_time:
+            return 0.0
+        if self.ramp_time > 0.0:
+            return min(1.0, (time - self.start_time) / self.ramp_time)
+        return 1.0
+
+
+def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: str,
+                  **timing) -> Traction:
+    """Traction on the points whose centres lie in [lo, hi], on their `surface` side
+    ('x+', 'z-', ...); force = t * V0^(2/3)."""
+    sel = np.flatnonzero(np.all((x >= np.asarray(lo)) & (x <= np.asarray(hi)), axis=1))
+    area = np.cbrt(vol0[sel]) ** 2
+    force = area[:, None] * np.asarray(traction, dtype=np.float64)[None, :]
+    axis, side = FACES[surface]
+    normal = np.zeros(3)
+    normal[axis] = 1.0 if side else -1.0
+    return Traction(sel.astype(np.int64), force, normal, **timing)
+
+
+def traction_nodal_forces(tractions: list[Traction], time: float, x: np.ndarray,
+                          lp: np.ndarray, grid: Grid) -> np.ndarray | None:
+    """Nodal forces (n_nodes, 3) of the active tractions, or None if there are none.
+
+    Summed point by point in a fixed order (np.add.at is sequential), so the result does
+    not depend on the thread count.
+    """
+    from grainscale.mpm.shape import LINEAR, evaluate
+
+    out = None
+    for t in tractions:
+        k = t.factor(time)
+        if k == 0.0:
+            continue
+        xs = np.ascontiguousarray(x[t.points] + lp[t.points, None] * t.normal[None, :])
+        base, w, _ = evaluate(xs, np.zeros(len(xs)), grid, LINEAR)
+        nx, ny = int(grid.nodes[0]), int(grid.nodes[1])
+        if out is None:
+            out = np.zeros((grid.n_nodes, 3))
+        for i in range(2):
+            for j in range(2):
+                for kk in range(2):
+                    ids = base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk))
+                    S = w[:, 0, i] * w[:, 1, j] * w[:, 2, kk]
+                    np.add.at(out, ids, (k * S)[:, None] * t.force)
+    return out

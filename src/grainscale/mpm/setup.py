@@ -1,0 +1,165 @@
+"""Build an MPMState from a validated case (config.case.Case).
+
+Every input problem that can be seen before the first step is reported here as a
+ConfigError naming the key, the value and the valid range: a missing point file, points
+outside the grid, a fixed dt above the CFL limit.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from grainscale.config.base import ConfigError
+from grainscale.config.case import Case
+from grainscale.mpm import boundary
+from grainscale.mpm.grid import Grid
+from grainscale.mpm.materials import KINDS
+from grainscale.mpm.points import concatenate, fill_box, fill_cylinder, make_points, read_points
+from grainscale.mpm.rigid import RigidBody
+from grainscale.mpm.step import MPMState
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _check_extent(grid: Grid, lo, hi, key: str) -> None:
+    """A filled shape must lie inside the grid (filling never silently clips it)."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    tol = 1e-9 * grid.cell_size
+    if np.any(lo < grid.origin - tol) or np.any(hi > grid.upper + tol):
+        raise ConfigError(
+            f"{key}: extends from {lo.tolist()} to {hi.tolist()}, outside the grid; valid "
+            f"range {grid.origin.tolist()} .. {grid.upper.tolist()} "
+            "(grid.origin .. grid.origin + grid.cells * grid.cell_size); set "
+            "clip_to_grid = true to keep only the part inside (symmetry planes)")
+
+
+def _shape_extent(shape) -> tuple[np.ndarray, np.ndarray]:
+    if shape.shape == "box":
+        return np.asarray(shape.lo), np.asarray(shape.hi)
+    c = np.asarray(shape.center, dtype=float)
+    lo, hi = c - shape.radius, c + shape.radius
+    ax = AXES[shape.axis]
+    lo[ax], hi[ax] = c[ax], c[ax] + shape.height
+    return lo, hi
+
+
+def _body_points(grid: Grid, body, i: int, case_dir: Path):
+    if body.shape != "file" and not body.clip_to_grid:
+        _check_extent(grid, *_shape_extent(body), f"bodies[{i}]")
+    if body.shape == "box":
+        if any(h <= l for l, h in zip(body.lo, body.hi, strict=True)):
+            raise ConfigError(f"bodies[{i}].hi = {list(body.hi)}: must exceed lo = "
+                              f"{list(body.lo)} on every axis")
+        return fill_box(grid, body.lo, body.hi, body.points_per_cell)
+    if body.shape == "cylinder":
+        return fill_cylinder(grid, body.center, body.radius, body.height, AXES[body.axis],
+                             body.points_per_cell)
+    path = (case_dir / body.path) if not Path(body.path).is_absolute() else Path(body.path)
+    if not path.is_file():
+        raise ConfigError(f"bodies[{i}].path = {body.path!r}: file not found ({path})")
+    try:
+        return read_points(path)
+    except ValueError as err:
+        raise ConfigError(f"bodies[{i}].path = {body.path!r}: {err}") from None
+
+
+def build_grid(case: Case) -> Grid:
+    g = case.grid
+    return Grid.make(g.origin, g.cell_size, g.cells)
+
+
+def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
+                material_factory=None) -> MPMState:
+    """The solver state at time.start. `material_factory(name, cfg, n_points)` may supply
+    materials of types this module does not know (the coupling's DEM material)."""
+    case_dir = Path(case_dir)
+    grid = build_grid(case)
+    names = list(case.materials)
+    sets = []
+    lo, hi = grid.origin, grid.upper
+    for i, body in enumerate(case.bodies):
+        x, vol = _body_points(grid, body, i, case_dir)
+        if x.shape[0] == 0:
+            raise ConfigError(f"bodies[{i}]: the {body.shape} contains no material point "
+                              "(is it inside the grid, larger than a sub-cell?)")
+        out = ~np.all((x >= lo) & (x <= hi), axis=1)
+        if out.any():
+            raise ConfigError(
+                f"bodies[{i}]: {int(out.sum())} material point(s) outside the grid, e.g. at "
+                f"{x[out][0].tolist()}; valid range {lo.tolist()} .. {hi.tolist()} "
+                "(grid.origin .. grid.origin + grid.cells * grid.cell_size)")
+        mcfg = case.materials[body.material]
+        lp = np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min())
+        sets.append(make_points(x, vol, mcfg.density, names.index(body.material),
+                                velocity=body.velocity, lp=lp))
+    pts = concatenate(sets)
+    materials, mat_points = [], []
+    for k, name in enumerate(names):
+        ids = np.flatnonzero(pts.mat == k).astype(np.int64)
+        cfg = case.materials[name]
+        if cfg.type in KINDS:
+            params = cfg.model_dump(exclude={"type"})
+            mat = KINDS[cfg.type](name, ids.size, **params)
+        elif material_factory is not None:
+            mat = material_factory(name, cfg, ids.size)
+        else:
+            raise ConfigError(f"materials.{name}.type = {cfg.type!r}: unknown material type; "
+                              f"valid: {sorted(KINDS)}")
+        materials.append(mat)
+        mat_points.append(None if ids.size == pts.n else ids)
+
+    t0 = case.time.start
+    constraints = []
+    for i, bc in enumerate(case.boundaries):
+        end = np.inf if bc.end_time is None else bc.end_time
+        if bc.face is not None:
+            nodes = boundary.face_nodes(grid, bc.face)
+            normal = boundary.FACES[bc.face][0]
+        else:
+            nodes = boundary.box_nodes(grid, bc.box.lo, bc.box.hi)
+            normal = AXES[bc.normal] if bc.normal else None
+            if nodes.size == 0:
+                raise ConfigError(f"boundaries[{i}].box = {bc.box.model_dump()}: contains no "
+                                  "grid node (nodes sit at origin + k * cell_size)")
+        constraints.append(boundary.constraint(nodes, bc.type, normal, end))
+    tractions = []
+    for i, t in enumerate(case.tractions):
+        tr = boundary.make_traction(pts.x, pts.vol0, t.lo, t.hi, t.traction, t.surface,
+                                    ramp_time=t.ramp_time,
+                                    start_time=t0 if t.start_time is None else t.start_time,
+                                    end_time=np.inf if t.end_time is None else t.end_time)
+        if tr.points.size == 0:
+            raise ConfigError(f"tractions[{i}]: box lo = {list(t.lo)}, hi = {list(t.hi)} "
+                              "selects no material point")
+        tractions.append(tr)
+    rigid = None
+    if case.rigid is not None:
+        r = case.rigid
+        if not r.clip_to_grid:
+            _check_extent(grid, *_shape_extent(r), "rigid")
+        if r.shape == "box":
+            x, vol = fill_box(grid, r.lo, r.hi, r.points_per_cell)
+        else:
+            x, vol = fill_cylinder(grid, r.center, r.radius, r.height, AXES[r.axis],
+                                   r.points_per_cell)
+        if x.shape[0] == 0:
+            raise ConfigError("rigid: the body contains no point inside the grid")
+        rigid = RigidBody(x=x, lp=np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min()),
+                          velocity=np.asarray(r.velocity, dtype=np.float64),
+                          ramp_time=r.ramp_time,
+                          start_time=t0 if r.start_time is None else r.start_time)
+    s = case.solver
+    state = MPMState(
+        grid=grid, points=pts, materials=materials, mat_points=mat_points,
+        constraints=constraints, tractions=tractions, rigid=rigid,
+        gravity=np.asarray(s.gravity, dtype=np.float64), scheme=s.scheme, shape=s.shape,
+        flip=s.flip, cfl=s.cfl, damping=case.damping.alpha,
+        damping_end=np.inf if case.damping.end_time is None else case.damping.end_time,
+        time=t0, step=0, n_threads=n_threads)
+    if s.dt is not None and s.dt > state.stable_dt():
+        raise ConfigError(f"solver.dt = {s.dt}: above the CFL limit cfl * h / (c + |v|) = "
+                          f"{state.stable_dt():.6g} s (cfl = {s.cfl}, h = "
+                          f"{grid.cell_size.min()} m, c = {state.wave_speed():.6g} m/s)")
+    return state

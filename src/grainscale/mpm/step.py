@@ -1,0 +1,222 @@
+"""The explicit MPM step as a short sequence of named stages (seed Eq. 3-6, 16-19).
+
+USF (the seed's order, Algorithm 1):
+    shape functions -> P2G mass, momentum -> grid velocity (+ BCs) -> dH, F, material
+    -> nodal forces -> grid momentum (+ damping, BCs, rigid body) -> G2P
+USL: the material update moves after G2P and uses the updated grid velocity.
+MUSL: as USL, but the grid velocity is first re-mapped from the updated point momenta.
+The stages are plain Python over the numba kernels of `shape` and `transfer`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from grainscale.mpm import boundary
+from grainscale.mpm.grid import Grid
+from grainscale.mpm.points import Points
+from grainscale.mpm.rigid import RigidBody
+from grainscale.mpm.shape import GIMP, evaluate, stencil_width
+from grainscale.mpm.transfer import Transfer, g2p_kernel, velocity_gradient_kernel
+
+SCHEMES = ("USF", "USL", "MUSL")
+MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry no velocity
+
+
+class SimulationError(RuntimeError):
+    """The run cannot continue (a point left the grid, a non-finite value appeared)."""
+
+
+@dataclass
+class MPMState:
+    grid: Grid
+    points: Points
+    materials: list  # objects with the interface of materials.base.Material
+    mat_points: list  # per material: (n,) int64 point ids, or None when it owns all points
+    constraints: list = field(default_factory=list)  # boundary.NodeConstraint
+    tractions: list = field(default_factory=list)  # boundary.Traction
+    rigid: RigidBody | None = None
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m/s^2
+    scheme: str = "USF"
+    shape: str = GIMP
+    flip: float = 1.0  # FLIP fraction of the velocity update (0 = PIC)
+    cfl: float = 0.5
+    damping: float = 0.0  # local damping coefficient alpha
+    damping_end: float = np.inf  # s, damping acts while time < damping_end
+    time: float = 0.0  # s
+    step: int = 0
+    n_threads: int = 1
+    # --- scratch, rebuilt every step -------------------------------------------------
+    vmax: float = 0.0  # m/s, largest point speed after the last step
+    last_dt: float = 0.0  # s, the last step taken
+
+    def __post_init__(self):
+        P = self.points.n
+        self.ns = stencil_width(self.shape)
+        self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads)
+        self.dH = np.zeros((P, 3, 3))
+        self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
+                          np.zeros((P, 3, 3)))
+        self.fext = np.zeros((P, 3))  # N, point forces (none yet: tractions act on nodes)
+        self.vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
+        self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
+        self.chunk_out = np.zeros_like(self.transfer.chunk_count)
+        self.mass_tol = MASS_TOL * float(self.points.m.max()) if P else 0.0
+
+    # ---------------------------------------------------------------- time step
+    def wave_speed(self) -> float:
+        return max((m.wave_speed() for m in self.materials), default=0.0)
+
+    def critical_dt(self) -> float:
+        """CFL limit dt = h_min / (c + |v|_max) (multiply by the CFL number to use it)."""
+        return float(self.grid.cell_size.min() / (self.wave_speed() + self.vmax))
+
+    def stable_dt(self) -> float:
+        return self.cfl * self.critical_dt()
+
+
+# ------------------------------------------------------------------------- stages
+def shape_functions(s: MPMState) -> None:
+    """S_Ip and grad S_Ip at the current point positions."""
+    s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape, out=s.shape_buf)
+
+
+def p2g(s: MPMState) -> None:
+    """Nodal mass and momentum, seed Eq. 16."""
+    pts = s.points
+    s.mass, s.momentum = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w, s.grid.nodes,
+                                                  s.ns)
+    s.active = s.mass > s.mass_tol
+
+
+def rigid_velocity(s: MPMState, dt: float) -> None:
+    """Nodes covered by the rigid body and the velocity it imposes during this step."""
+    if s.rigid is None:
+        s.rigid_nodes = np.zeros(0, dtype=np.int64)
+        return
+    s.rigid_nodes = s.rigid.covered_nodes(s.grid)
+    s.rigid_v = s.rigid.velocity_at(s.time + 0.5 * dt)
+
+
+def grid_velocity(s: MPMState) -> None:
+    """v_I = p_I / m_I with the Dirichlet conditions and the rigid body applied."""
+    v = np.zeros_like(s.momentum)
+    a = s.active
+    v[a] = s.momentum[a] / s.mass[a, None]
+    boundary.apply_constraints(s.constraints, s.time, v)
+    if s.rigid is not None:
+        v[s.rigid_nodes] = s.rigid_v
+    s.v_old = v
+
+
+def update_stress(s: MPMState, vgrid: np.ndarray, dt: float) -> None:
+    """dH_p = dt sum_I v_I (x) grad S_Ip (seed Eq. 17), F and V, then every material."""
+    pts = s.points
+    velocity_gradient_kernel(vgrid, s.base, s.w, s.dw, s.grid.nodes, s.ns, dt, s.dH, pts.F,
+                             pts.vol0, pts.vol)
+    for mat, ids in zip(s.materials, s.mat_points, strict=True):
+        if ids is None:
+            mat.update(s.dH, dt, pts.stress)
+        elif ids.size:
+            sig = pts.stress[ids]
+            mat.update(s.dH[ids], dt, sig)
+            pts.stress[ids] = sig
+
+
+def nodal_forces(s: MPMState) -> None:
+    """f_I = f_int + f_ext (seed Eq. 5-6): stress divergence, gravity, point tractions."""
+    pts = s.points
+    s.force = s.transfer.force(pts.m, pts.vol, pts.stress, s.fext, s.gravity,
+                               s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns)
+    ft = boundary.traction_nodal_forces(s.tractions, s.time, pts.x, pts.lp, s.grid)
+    if ft is not None:
+        s.force += ft
+
+
+def integrate_grid(s: MPMState, dt: float) -> None:
+    """p_I <- m_I v_I + dt f_I (seed Eq. 3), with damping, Dirichlet conditions and the
+    rigid body; the rigid body's reaction is recorded."""
+    f = s.force
+    if s.rigid is not None:
+        # the force the body exerts on the nodes it covers is (m_I v_body - p_I)/dt - f_I;
+        # the material pushes back with minus its sum (damping does not enter: it is a
+        # numerical device of the free nodes)
+        rn = s.rigid_nodes
+        target = s.mass[rn, None] * s.rigid_v[None, :]
+        p_rn = s.mass[rn, None] * s.v_old[rn] + dt * f[rn]
+        s.rigid.force = -(target - p_rn).sum(axis=0) / dt
+    if s.damping > 0.0 and s.time < s.damping_end:
+        boundary.local_damping(f, s.v_old, s.damping)
+    p = s.mass[:, None] * s.v_old + dt * f
+    boundary.apply_constraints(s.constraints, s.time, p)
+    if s.rigid is not None:
+        p[rn] = target
+    v = np.zeros_like(p)
+    a = s.active
+    v[a] = p[a] / s.mass[a, None]
+    if s.rigid is not None:
+        v[s.rigid_nodes] = s.rigid_v  # also on covered nodes without material
+    s.v_new = v
+
+
+def g2p(s: MPMState, dt: float) -> None:
+    """Point velocity (FLIP/PIC, seed Eq. 18) and position (seed Eq. 19)."""
+    pts = s.points
+    g = s.grid
+    g2p_kernel(s.v_old, s.v_new, s.base, s.w, g.nodes, s.ns, dt, s.flip, g.origin, g.upper,
+               pts.x, pts.v, s.chunk_vmax, s.chunk_out)
+    s.vmax = float(s.chunk_vmax.max()) if pts.n else 0.0
+    n_out = int(s.chunk_out.sum())
+    if n_out:
+        raise SimulationError(f"step {s.step}: {n_out} material point(s) left the grid; "
+                              "enlarge [grid] or constrain the boundary")
+    if not np.isfinite(s.vmax):
+        raise SimulationError(f"step {s.step}: non-finite point velocity (time step too large?)")
+
+
+def remap_velocity(s: MPMState) -> None:
+    """MUSL: grid velocity re-mapped from the updated point momenta (same S_Ip)."""
+    pts = s.points
+    _, mom = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w, s.grid.nodes, s.ns)
+    v = np.zeros_like(mom)
+    a = s.active
+    v[a] = mom[a] / s.mass[a, None]
+    boundary.apply_constraints(s.constraints, s.time, v)
+    if s.rigid is not None:
+        v[s.rigid_nodes] = s.rigid_v
+    s.v_new = v
+
+
+def advance_rigid(s: MPMState, dt: float) -> None:
+    if s.rigid is not None:
+        s.rigid.advance(s.time, dt)
+
+
+# --------------------------------------------------------------------------- step
+def step(s: MPMState, dt: float) -> None:
+    """One explicit step of size dt (s); USF, USL and MUSL differ only in where
+    update_stress sits."""
+    shape_functions(s)
+    p2g(s)
+    rigid_velocity(s, dt)
+    grid_velocity(s)
+    if s.scheme == "USF":
+        update_stress(s, s.v_old, dt)
+    nodal_forces(s)
+    integrate_grid(s, dt)
+    g2p(s, dt)
+    if s.scheme == "MUSL":
+        remap_velocity(s)
+    if s.scheme != "USF":
+        update_stress(s, s.v_new, dt)
+    advance_rigid(s, dt)
+    s.last_dt = dt
+    s.time += dt
+    s.step += 1
+
+
+def kinetic_energy(pts: Points) -> float:
+    """sum_p m_p |v_p|^2 / 2, J."""
+    return float(0.5 * np.dot(pts.m, np.einsum("ij,ij->i", pts.v, pts.v)))

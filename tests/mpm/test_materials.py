@@ -1,0 +1,128 @@
+"""Materials driven directly through the batched interface (no grid)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from grainscale.mpm.materials import DruckerPrager, LinearElastic, MohrCoulomb
+from grainscale.mpm.materials.base import p_q
+
+E, NU = 1e7, 0.3
+
+
+def _mc_f(stress, phi, c=0.0):
+    """Mohr-Coulomb yield function of each stress (tension positive), Pa."""
+    s = np.sort(np.linalg.eigvalsh(stress), axis=-1)[..., ::-1]
+    sp = math.sin(math.radians(phi))
+    return (s[..., 0] - s[..., 2]) + (s[..., 0] + s[..., 2]) * sp - 2 * c * math.cos(
+        math.radians(phi))
+
+
+def test_elastic_rigid_rotation_keeps_stress_invariants():
+    """A pure spin increment rotates the stress (Hughes-Winget) without changing it."""
+    mat = LinearElastic("e", 1, density=1000.0, youngs_modulus=E, poisson_ratio=NU)
+    sig = np.array([[[-3.0, 1.0, 0.5], [1.0, -2.0, 0.2], [0.5, 0.2, -1.0]]]) * 1e3
+    w = 0.05
+    dH = np.array([[[0.0, -w, 0.0], [w, 0.0, 0.0], [0.0, 0.0, 0.0]]])
+    out = sig.copy()
+    mat.update(dH, 1e-3, out)
+    np.testing.assert_allclose(np.linalg.eigvalsh(out), np.linalg.eigvalsh(sig), rtol=1e-12)
+    assert not np.allclose(out, sig)  # it did rotate
+
+
+def test_elastic_increment_is_hooke():
+    mat = LinearElastic("e", 1, density=1000.0, youngs_modulus=E, poisson_ratio=NU)
+    de = np.diag([1e-5, -2e-5, 3e-6])[None]
+    out = np.zeros((1, 3, 3))
+    mat.update(de, 1e-3, out)
+    lam, G = mat.lam, mat.G
+    np.testing.assert_allclose(out[0], lam * np.trace(de[0]) * np.eye(3) + 2 * G * de[0],
+                               rtol=1e-12)
+
+
+@pytest.mark.parametrize("cohesion", [0.0, 5e3])
+def test_mohr_coulomb_trial_outside_returns_onto_surface(cohesion):
+    """Random large strain increments from a compressed state: every returned stress lies
+    on the yield surface (|f| below 1e-9 of the stress scale) or inside it."""
+    rng = np.random.default_rng(4)
+    n = 500
+    mat = MohrCoulomb("mc", n, density=1000.0, youngs_modulus=E, poisson_ratio=NU,
+                      friction_angle=30.0, dilation_angle=5.0, cohesion=cohesion,
+                      tension_cutoff=0.0)
+    stress = np.tile(-1e5 * np.eye(3), (n, 1, 1))
+    dH = rng.normal(scale=5e-3, size=(n, 3, 3))
+    trial = stress + mat.lam * np.trace(dH, axis1=1, axis2=2)[:, None, None] * np.eye(3) + \
+        mat.G * (dH + dH.transpose(0, 2, 1))
+    mat.update(dH, 1e-3, stress)
+    f_trial = _mc_f(trial, 30.0, cohesion)
+    f = _mc_f(stress, 30.0, cohesion)
+    outside = f_trial > 0
+    assert outside.sum() > 100  # the test does exercise the return
+    scale = np.abs(np.linalg.eigvalsh(trial)).max(axis=1)
+    assert np.all(f <= 1e-9 * scale)
+    # trial stresses outside the surface end on it, unless cut off in tension
+    s_max = np.linalg.eigvalsh(stress)[:, -1]
+    on = outside & (s_max < -1e-9 * scale)
+    np.testing.assert_allclose(f[on] / scale[on], 0.0, atol=1e-9)
+    assert np.all(s_max <= 1e-9 * scale)  # tension cut-off T = 0
+    assert np.all(mat.eps_p[outside] > 0) and np.all(mat.eps_p[~outside] == 0)
+
+
+def _drained_triaxial(mat, confining=1e5, steps=400, d_axial=2e-4):
+    """Axial compression (z) with the lateral stress held at -confining: the lateral
+    strain increment of each step is solved by the secant method on copies."""
+    stress = np.array([-confining * np.eye(3)])
+    path = []
+    for _ in range(steps):
+        def trial(de_lat, commit=False, stress=stress):
+            dH = np.diag([de_lat, de_lat, -d_axial])[None]
+            s = stress.copy()
+            st = mat.state()
+            saved = {k: v.copy() for k, v in st.items()}
+            mat.update(dH, 1e-3, s)
+            if not commit:
+                mat.load_state(saved)
+            return s
+        x0, x1 = 0.0, NU * d_axial
+        r0 = trial(x0)[0, 0, 0] + confining
+        r1 = trial(x1)[0, 0, 0] + confining
+        for _ in range(30):
+            if abs(r1) < 1e-9 * confining or r1 == r0:
+                break
+            x0, x1, r0 = x1, x1 - r1 * (x1 - x0) / (r1 - r0), r1
+            r1 = trial(x1)[0, 0, 0] + confining
+        stress = trial(x1, commit=True)
+        p, q = p_q(stress)
+        path.append((p[0], q[0]))
+    return np.array(path)
+
+
+@pytest.mark.parametrize("kind", [MohrCoulomb, DruckerPrager])
+@pytest.mark.parametrize("phi", [20.0, 30.0])
+def test_drained_triaxial_reaches_critical_stress_ratio(kind, phi):
+    """Cohesionless, perfectly plastic: q/p -> M = 6 sin(phi)/(3 - sin(phi)) within 1 %
+    (Drucker-Prager is matched to Mohr-Coulomb in triaxial compression)."""
+    mat = kind("m", 1, density=1000.0, youngs_modulus=E, poisson_ratio=NU,
+               friction_angle=phi, dilation_angle=0.0)
+    path = _drained_triaxial(mat)
+    s = math.sin(math.radians(phi))
+    M = 6 * s / (3 - s)
+    p, q = path[-1]
+    assert abs(p - (1e5 + q / 3)) < 1e-6 * p  # lateral stress held: dp = dq/3
+    np.testing.assert_allclose(q / p, M, rtol=0.01)
+    assert np.all(path[:, 1] / path[:, 0] <= M * (1 + 1e-9))  # never above the surface
+
+
+def test_drucker_prager_returns_onto_cone():
+    rng = np.random.default_rng(5)
+    n = 300
+    mat = DruckerPrager("dp", n, density=1000.0, youngs_modulus=E, poisson_ratio=NU,
+                        friction_angle=25.0, dilation_angle=0.0, cohesion=1e3)
+    stress = np.tile(-5e4 * np.eye(3), (n, 1, 1))
+    dH = rng.normal(scale=5e-3, size=(n, 3, 3))
+    mat.update(dH, 1e-3, stress)
+    p, q = p_q(stress)
+    f = q - mat.M * p - mat.k
+    assert np.all(f <= 1e-9 * np.abs(stress).max())
+    assert (mat.eps_p > 0).sum() > 50

@@ -1,0 +1,152 @@
+"""`grainscale run`: outputs, --max-steps, checkpoints and --resume, exit codes."""
+
+import textwrap
+
+from grainscale.cli import main
+
+CASE = """
+title = "tiny block under a plate"
+
+[grid]
+cell_size = 0.05
+cells = [4, 4, 5]
+
+[solver]
+gravity = [0.0, 0.0, -9.81]
+
+[time]
+start = -0.01
+end = 0.03
+
+[materials.soil]
+type = "mohr_coulomb"
+density = 1000.0
+youngs_modulus = 1e6
+poisson_ratio = 0.3
+friction_angle = 30.0
+
+[[bodies]]
+shape = "box"
+material = "soil"
+lo = [0.0, 0.0, 0.0]
+hi = [0.2, 0.2, 0.1]
+
+[[boundaries]]
+type = "fixed"
+face = "z-"
+
+[[boundaries]]
+type = "roller"
+face = "x-"
+
+[[tractions]]
+lo = [0.15, 0.0, 0.0]
+hi = [0.2, 0.2, 0.1]
+surface = "x+"
+traction = [-2000.0, 0.0, 0.0]
+ramp_time = 0.01
+
+[damping]
+alpha = 0.2
+end_time = 0.0
+
+[rigid]
+shape = "box"
+lo = [0.05, 0.05, 0.1]
+hi = [0.15, 0.15, 0.15]
+velocity = [0.0, 0.0, -0.05]
+ramp_time = 0.01
+
+[output]
+interval = 0.004
+checkpoint_every = 0
+history = ["time", "kinetic_energy", "rigid_fz", "rigid_depth", "force"]
+"""
+
+
+def _case(tmp_path):
+    p = tmp_path / "case.toml"
+    p.write_text(textwrap.dedent(CASE))
+    return p
+
+
+def _rows(path):
+    return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+
+
+def test_run_writes_outputs(tmp_path):
+    case = _case(tmp_path)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--quiet"]) == 0
+    rows = _rows(out / "history.csv")
+    assert rows[0] == "step,time,kinetic_energy,rigid_fz,rigid_depth,force"
+    last = rows[-1].split(",")
+    assert abs(float(last[1]) - 0.03) < 1e-12  # ran to time.end
+    assert float(last[3]) > 0  # the soil pushes the plate up
+    # from time.start = -0.01: ramp over 0.01 s, then constant (midpoint rule at the kink)
+    assert abs(float(last[4]) - 0.05 * (0.04 - 0.005)) < 1e-6
+    assert float(last[5]) == float(last[3])  # downward motion: resistance = +f_z
+    assert (out / "case.resolved.toml").read_text().count("grainscale_version") == 1
+    assert "flip = 0.99" in (out / "case.resolved.toml").read_text()  # defaults filled in
+    frames = sorted((out / "frames").glob("frame_*.vtu"))
+    assert len(frames) >= 10 and "frame_00000.vtu" in (out / "frames.pvd").read_text()
+    import meshio
+
+    m = meshio.read(frames[-1])
+    for k in ("position", "velocity", "displacement", "stress", "p", "q", "eps_v", "material",
+              "plastic_strain"):
+        assert k in m.point_data, k
+    assert m.point_data["stress"].shape[1] == 9
+
+
+def test_max_steps_writes_final_row(tmp_path):
+    case = _case(tmp_path)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--max-steps", "7", "--quiet"]) == 0
+    assert _rows(out / "history.csv")[-1].startswith("7,")
+
+
+def test_resume_gives_the_same_history(tmp_path):
+    case = _case(tmp_path)
+    full, part = tmp_path / "full", tmp_path / "part"
+    assert main(["run", str(case), "--out", str(full), "--checkpoint-every", "10",
+                 "--quiet"]) == 0
+    assert main(["run", str(case), "--out", str(part), "--checkpoint-every", "10",
+                 "--max-steps", "25", "--quiet"]) == 0
+    assert (part / "checkpoint.h5").is_file()
+    assert (part / "history.csv").read_text() != (full / "history.csv").read_text()
+    assert main(["run", str(case), "--out", str(part), "--checkpoint-every", "10",
+                 "--resume", "--quiet"]) == 0
+    assert (part / "history.csv").read_text() == (full / "history.csv").read_text()
+    assert (part / "frames.pvd").read_text() == (full / "frames.pvd").read_text()
+    assert (part / "rigid.pvd").read_text() == (full / "rigid.pvd").read_text()
+
+
+def test_bad_case_exit_code_2(tmp_path, capsys):
+    p = tmp_path / "bad.toml"
+    p.write_text(textwrap.dedent(CASE).replace("cell_size = 0.05", "cell_size = 0.0"))
+    assert main(["run", str(p), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "grid.cell_size" in err and "0.0" in err
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_resume_without_checkpoint_is_an_error(tmp_path, capsys):
+    case = _case(tmp_path)
+    assert main(["run", str(case), "--out", str(tmp_path / "o"), "--resume", "--quiet"]) == 2
+    assert "checkpoint" in capsys.readouterr().err
+
+
+def test_point_leaving_the_grid_stops_the_run_cleanly(tmp_path, capsys):
+    """No wall at x+: a block thrown at it leaves the grid; exit code 1, rows intact."""
+    text = textwrap.dedent(CASE).replace('lo = [0.0, 0.0, 0.0]\nhi = [0.2, 0.2, 0.1]',
+                                         'lo = [0.0, 0.0, 0.0]\nhi = [0.2, 0.2, 0.1]\n'
+                                         'velocity = [5.0, 0.0, 0.0]')
+    assert "velocity = [5.0" in text
+    p = tmp_path / "throw.toml"
+    p.write_text(text)
+    out = tmp_path / "o"
+    assert main(["run", str(p), "--out", str(out), "--quiet"]) == 1
+    assert "left the grid" in capsys.readouterr().err
+    rows = _rows(out / "history.csv")
+    assert len(rows) >= 2 and all(len(r.split(",")) == 6 for r in rows)
