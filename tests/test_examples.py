@@ -5,16 +5,28 @@ from pathlib import Path
 import pytest
 
 from grainscale.cli import main
+from grainscale.config import load_toml
+from grainscale.config.rve import RVECase
 from grainscale.config.case import load_case
 from grainscale.mpm.setup import build_state
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-@pytest.mark.parametrize("case", sorted(EXAMPLES.glob("*/*.toml")), ids=lambda p: p.name)
+MPM_CASES = sorted(p for p in EXAMPLES.glob("*/*.toml") if p.parent.name != "rve")
+RVE_FILES = sorted((EXAMPLES / "rve").glob("*.toml"))
+
+
+@pytest.mark.parametrize("case", MPM_CASES, ids=lambda p: p.name)
 def test_example_builds(case):
     s = build_state(load_case(case), case.parent)
     assert s.points.n > 0 and s.stable_dt() > 0
+
+
+@pytest.mark.parametrize("path", RVE_FILES, ids=lambda p: p.name)
+def test_rve_parameter_files_are_valid(path):
+    case = load_toml(path, RVECase)
+    assert case.rve.preparation.porosity is not None
 
 
 def test_column_example_history_columns(tmp_path):
