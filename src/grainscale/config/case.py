@@ -122,18 +122,21 @@ class NodeBoxCfg(StrictModel):
 
 
 class BoundaryCfg(StrictModel):
-    type: Literal["fixed", "roller"]
+    type: Literal["fixed", "roller", "velocity"]
     face: Face | None = None  # a grid face ...
     box: NodeBoxCfg | None = None  # ... or the nodes inside a box
     normal: Axis | None = None  # roller in a box: the constrained component
     end_time: float | None = None  # s; removed at this time (default: never)
+    velocity: float | None = None  # m/s; type "velocity": the normal component's value
 
     @model_validator(mode="after")
     def _where(self):
         if (self.face is None) == (self.box is None):
             raise ValueError("give exactly one of `face` or `box`")
-        if self.type == "roller" and self.box is not None and self.normal is None:
-            raise ValueError("a roller on a box of nodes needs `normal` ('x', 'y' or 'z')")
+        if self.type in ("roller", "velocity") and self.box is not None and self.normal is None:
+            raise ValueError(f"a {self.type} on a box of nodes needs `normal` ('x', 'y' or 'z')")
+        if (self.type == "velocity") != (self.velocity is not None):
+            raise ValueError("`velocity` (m/s) is given with, and only with, type = 'velocity'")
         return self
 
 
@@ -145,6 +148,7 @@ class TractionCfg(StrictModel):
     ramp_time: NonNeg = 0.0  # s, linear ramp from start_time
     start_time: float | None = None  # s; default time.start
     end_time: float | None = None  # s; default never
+    area: Literal["current", "initial"] = "current"  # Cauchy (deformed) or nominal
 
 
 class DampingCfg(StrictModel):

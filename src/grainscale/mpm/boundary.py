@@ -1,16 +1,21 @@
 """Boundary conditions on grid nodes and on material points.
 
 - Node constraints (Dirichlet): the nodes of a grid face or of a box of nodes have some
-  velocity components held at zero: `fixed` (all three, no-slip) or `roller` (the normal
-  one only, frictionless). A constraint can end at a given time (it is removed for
-  t >= end_time, as the column release of validation case 2).
+  velocity components prescribed: `fixed` (all three zero, no-slip), `roller` (the
+  normal one zero, frictionless) or `velocity` (the normal one held at a given value,
+  e.g. the displacement-controlled top of the unit element test). A constraint can end
+  at a given time (it is removed for t >= end_time, as the column release of case 2).
 - Point tractions (Neumann): a traction vector t (Pa) on the material points selected by
   a box; each carries the force t * A_p with the tributary area A_p = V0_p^(2/3) (the
   face of its cubic sub-cell). The surface term of seed Eq. 6, int N_I t dS, is evaluated
   at the point's surface position x_p + l_p n (n the outward normal of the loaded
   surface) with linear weights, so the load reaches the nodes of the surface itself and
   the outermost cell carries the full stress (mapping it from x_p instead leaves a
-  quarter of it on the next node plane in). Nominal traction: the area is not updated.
+  quarter of it on the next node plane in). With area "current" (the default) the
+  traction is a Cauchy traction on the deformed surface: the area follows Nanson's
+  formula a = J |F^-T N| A0 with each point's deformation gradient, so a confining
+  pressure stays a pressure while the body deforms, and the load acts at the deformed
+  surface x_p + l_p |F N|; "initial" keeps A0 and l_p (nominal).
 - Local non-viscous damping (Cundall): f_I <- f_I - alpha |f_I| sign(v_I) per component,
   for quasi-static initialisation (geostatic stress), switched off at `end_time`.
 """
@@ -30,8 +35,9 @@ AXES = {"x": 0, "y": 1, "z": 2}
 @dataclass
 class NodeConstraint:
     nodes: np.ndarray  # (n,) int64 node ids
-    mask: np.ndarray  # (3,) bool: components held at zero velocity
+    mask: np.ndarray  # (3,) bool: components held at a prescribed velocity
     end_time: float = np.inf  # s; the constraint acts while time < end_time
+    value: np.ndarray | None = None  # (3,) m/s, prescribed velocity (default zero)
 
     def active(self, time: float) -> bool:
         return time < self.end_time
@@ -56,24 +62,37 @@ def box_nodes(grid: Grid, lo, hi) -> np.ndarray:
 
 
 def constraint(nodes: np.ndarray, kind: str, normal: int | None,
-               end_time: float = np.inf) -> NodeConstraint:
-    """`fixed`: all components; `roller`: only component `normal` (0, 1 or 2)."""
+               end_time: float = np.inf, velocity: float = 0.0) -> NodeConstraint:
+    """`fixed`: all components zero; `roller`: component `normal` (0, 1 or 2) zero;
+    `velocity`: component `normal` held at `velocity` (m/s)."""
     mask = np.zeros(3, dtype=bool)
+    value = None
     if kind == "fixed":
         mask[:] = True
     elif kind == "roller":
         mask[normal] = True
+    elif kind == "velocity":
+        mask[normal] = True
+        value = np.zeros(3)
+        value[normal] = velocity
     else:
         raise ValueError(f"unknown constraint type {kind!r}")
-    return NodeConstraint(nodes, mask, end_time)
+    return NodeConstraint(nodes, mask, end_time, value)
 
 
-def apply_constraints(constraints: list[NodeConstraint], time: float, a: np.ndarray) -> None:
-    """Zero the constrained components of a nodal vector field a (n_nodes, 3) in place."""
+def apply_constraints(constraints: list[NodeConstraint], time: float, a: np.ndarray,
+                      mass: np.ndarray | None = None) -> None:
+    """Impose the constrained components of a nodal field a (n_nodes, 3) in place: a
+    velocity field, or a momentum field when the nodal `mass` is given (m_I v)."""
     for c in constraints:
         if c.active(time):
             for comp in np.flatnonzero(c.mask):
-                a[c.nodes, comp] = 0.0
+                if c.value is None or c.value[comp] == 0.0:
+                    a[c.nodes, comp] = 0.0
+                elif mass is None:
+                    a[c.nodes, comp] = c.value[comp]
+                else:
+                    a[c.nodes, comp] = mass[c.nodes] * c.value[comp]
 
 
 def local_damping(f: np.ndarray, v: np.ndarray, alpha: float) -> None:
@@ -89,6 +108,7 @@ class Traction:
     ramp_time: float = 0.0  # s, linear ramp from start_time
     start_time: float = 0.0
     end_time: float = np.inf
+    current_area: bool = True  # Cauchy traction on the deformed surface (Nanson)
 
     def factor(self, time: float) -> float:
         if time >= self.end_time or time < self.start_time:
@@ -101,7 +121,7 @@ class Traction:
 def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: str,
                   **timing) -> Traction:
     """Traction on the points whose centres lie in [lo, hi], on their `surface` side
-    ('x+', 'z-', ...); force = t * V0^(2/3)."""
+    ('x+', 'z-', ...); force = t * V0^(2/3) (times the Nanson area ratio if current)."""
     sel = np.flatnonzero(np.all((x >= np.asarray(lo)) & (x <= np.asarray(hi)), axis=1))
     area = np.cbrt(vol0[sel]) ** 2
     force = area[:, None] * np.asarray(traction, dtype=np.float64)[None, :]
@@ -111,8 +131,16 @@ def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: st
     return Traction(sel.astype(np.int64), force, normal, **timing)
 
 
+def area_ratio(F: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """a/A0 = J |F^-T N| of each point's surface with reference normal N (Nanson)."""
+    J = np.linalg.det(F)
+    a = np.linalg.solve(np.swapaxes(F, 1, 2), np.broadcast_to(normal, (len(F), 3))[..., None])
+    return J * np.linalg.norm(a[..., 0], axis=1)
+
+
 def traction_nodal_forces(tractions: list[Traction], time: float, x: np.ndarray,
-                          lp: np.ndarray, grid: Grid) -> np.ndarray | None:
+                          lp: np.ndarray, grid: Grid,
+                          F: np.ndarray | None = None) -> np.ndarray | None:
     """Nodal forces (n_nodes, 3) of the active tractions, or None if there are none.
 
     Summed point by point in a fixed order (np.add.at is sequential), so the result does
@@ -125,7 +153,13 @@ def traction_nodal_forces(tractions: list[Traction], time: float, x: np.ndarray,
         k = t.factor(time)
         if k == 0.0:
             continue
-        xs = np.ascontiguousarray(x[t.points] + lp[t.points, None] * t.normal[None, :])
+        force = t.force
+        offset = lp[t.points]
+        if t.current_area and F is not None:
+            Fp = F[t.points]
+            force = force * area_ratio(Fp, t.normal)[:, None]
+            offset = offset * np.linalg.norm(Fp @ t.normal, axis=1)  # stretched half-size
+        xs = np.ascontiguousarray(x[t.points] + offset[:, None] * t.normal[None, :])
         base, w, _ = evaluate(xs, np.zeros(len(xs)), grid, LINEAR)
         nx, ny = int(grid.nodes[0]), int(grid.nodes[1])
         if out is None:
@@ -135,5 +169,5 @@ def traction_nodal_forces(tractions: list[Traction], time: float, x: np.ndarray,
                 for kk in range(2):
                     ids = base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk))
                     S = w[:, 0, i] * w[:, 1, j] * w[:, 2, kk]
-                    np.add.at(out, ids, (k * S)[:, None] * t.force)
+                    np.add.at(out, ids, (k * S)[:, None] * force)
     return out

@@ -123,13 +123,15 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
             if nodes.size == 0:
                 raise ConfigError(f"boundaries[{i}].box = {bc.box.model_dump()}: contains no "
                                   "grid node (nodes sit at origin + k * cell_size)")
-        constraints.append(boundary.constraint(nodes, bc.type, normal, end))
+        constraints.append(boundary.constraint(nodes, bc.type, normal, end,
+                                               velocity=bc.velocity or 0.0))
     tractions = []
     for i, t in enumerate(case.tractions):
         tr = boundary.make_traction(pts.x, pts.vol0, t.lo, t.hi, t.traction, t.surface,
                                     ramp_time=t.ramp_time,
                                     start_time=t0 if t.start_time is None else t.start_time,
-                                    end_time=np.inf if t.end_time is None else t.end_time)
+                                    end_time=np.inf if t.end_time is None else t.end_time,
+                                    current_area=t.area == "current")
         if tr.points.size == 0:
             raise ConfigError(f"tractions[{i}]: box lo = {list(t.lo)}, hi = {list(t.hi)} "
                               "selects no material point")

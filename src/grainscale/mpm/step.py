@@ -130,7 +130,7 @@ def nodal_forces(s: MPMState) -> None:
     pts = s.points
     s.force = s.transfer.force(pts.m, pts.vol, pts.stress, s.fext, s.gravity,
                                s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns)
-    ft = boundary.traction_nodal_forces(s.tractions, s.time, pts.x, pts.lp, s.grid)
+    ft = boundary.traction_nodal_forces(s.tractions, s.time, pts.x, pts.lp, s.grid, pts.F)
     if ft is not None:
         s.force += ft
 
@@ -150,7 +150,7 @@ def integrate_grid(s: MPMState, dt: float) -> None:
     if s.damping > 0.0 and s.time < s.damping_end:
         boundary.local_damping(f, s.v_old, s.damping)
     p = s.mass[:, None] * s.v_old + dt * f
-    boundary.apply_constraints(s.constraints, s.time, p)
+    boundary.apply_constraints(s.constraints, s.time, p, s.mass)
     if s.rigid is not None:
         p[rn] = target
     v = np.zeros_like(p)
