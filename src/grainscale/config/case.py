@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 from pydantic import Field, field_validator, model_validator
 
 from grainscale.config.base import ConfigError, StrictModel, load_toml
+from grainscale.config.rve import IsotropicTest, RVEParams, ShearTest, TriaxialTest, UndrainedTest
 
 Vec3 = tuple[float, float, float]
 Pos = Annotated[float, Field(gt=0)]
@@ -83,7 +84,22 @@ class DruckerPragerCfg(_Frictional):
     type: Literal["drucker_prager"]
 
 
-MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg,
+class DEMMaterialCfg(StrictModel):
+    """The multiscale material: one periodic DEM RVE per point, from the case's [rve]."""
+
+    type: Literal["dem"]
+    # packing files (.txt exchange format or .h5 full state), relative to the case file;
+    # empty: `library` packings are generated from [rve] with seeds rve.seed + k
+    packings: list[str] = []
+    library: Annotated[int, Field(ge=1, le=256)] = 1
+    assignment_seed: Annotated[int, Field(ge=0)] = 0  # random packing-to-point assignment
+    time_integration: Literal["dynamic", "quasi_static"] = "dynamic"
+    min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
+    strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
+    density: Pos | None = None  # kg/m^3; the packings' bulk density (set by the run)
+
+
+MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg | DEMMaterialCfg,
                         Field(discriminator="type")]
 
 
@@ -192,7 +208,9 @@ class ColumnCfg(StrictModel):
     front_quantile: Annotated[float, Field(gt=0, le=1)] = 1.0  # 1: outermost point edge
 
 
-HISTORY_ALWAYS = ("time", "dt", "kinetic_energy")
+HISTORY_ALWAYS = ("time", "dt", "kinetic_energy", "axial_strain", "volumetric_strain", "p",
+                  "q", "q_over_p")
+HISTORY_DEM = ("porosity", "coordination", "mean_rotation")
 HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height")
 HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force")
 
@@ -203,6 +221,7 @@ class OutputCfg(StrictModel):
     frames: bool = True  # write VTK frames
     checkpoint_every: Annotated[int, Field(ge=0)] = 0  # steps; 0: no checkpoints
     history: list[str] = ["time", "kinetic_energy"]  # columns after `step`
+    axial_axis: Axis = "z"  # axial_strain = 1 - mean F_aa along this axis
     column: ColumnCfg | None = None
 
 
@@ -218,11 +237,25 @@ class Case(StrictModel):
     damping: DampingCfg = DampingCfg()
     rigid: RigidCfg | None = None
     output: OutputCfg
+    # the DEM side (multiscale cases): the RVE of the "dem" materials, and element tests
+    # of the same RVE for `grainscale rve triaxial CASE.toml` and friends
+    rve: RVEParams | None = None
+    triaxial: TriaxialTest | None = None
+    undrained: UndrainedTest | None = None
+    isotropic: IsotropicTest | None = None
+    shear: ShearTest | None = None
 
 
 def check_case(case: Case) -> None:
     """Cross-table checks; ConfigError names key, value and what is valid."""
     names = sorted(case.materials)
+    for name, m in case.materials.items():
+        if m.type == "dem" and case.rve is None:
+            raise ConfigError(f"materials.{name}.type = 'dem' needs an [rve] table for the "
+                              "contact parameters of its packings")
+        if m.type == "dem" and m.density is not None:
+            raise ConfigError(f"materials.{name}.density = {m.density}: a 'dem' material's "
+                              "density is that of its packings; remove the key")
     for i, b in enumerate(case.bodies):
         if b.material not in case.materials:
             raise ConfigError(f"bodies[{i}].material = {b.material!r}: no such material; "
@@ -235,11 +268,13 @@ def check_case(case: Case) -> None:
         valid += HISTORY_COLUMN
     if case.rigid is not None:
         valid += HISTORY_RIGID
+    if any(m.type == "dem" for m in case.materials.values()):
+        valid += HISTORY_DEM
     for i, c in enumerate(case.output.history):
         if c not in valid:
             raise ConfigError(f"output.history[{i}] = {c!r}: not an available column; valid: "
                               f"{valid} (runout columns need [output.column], rigid_* need "
-                              "[rigid])")
+                              "[rigid], porosity/coordination/mean_rotation a 'dem' material)")
     if "t_over_tc" in case.output.history and not any(case.solver.gravity):
         raise ConfigError("output.history contains 't_over_tc' but solver.gravity = "
                           f"{list(case.solver.gravity)}: tau_c = sqrt(H/g) needs gravity")

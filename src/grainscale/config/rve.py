@@ -131,3 +131,31 @@ class RVECase(StrictModel):
     undrained: UndrainedTest = UndrainedTest()
     isotropic: IsotropicTest = IsotropicTest()
     shear: ShearTest = ShearTest()
+
+
+def load_rve_case(path) -> RVECase:
+    """The [rve] and element-test tables of a file for `grainscale rve ...`.
+
+    A full multiscale case file is accepted too (its other tables are validated as a
+    case, so a typo anywhere is still reported), which lets the pure-DEM test of a case's
+    RVE run from the very file of the multiscale run.
+    """
+    import tomllib
+    from pathlib import Path
+
+    from grainscale.config.base import ConfigError, load_toml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"case file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    if set(data) <= set(RVECase.model_fields):
+        return load_toml(path, RVECase)
+    from grainscale.config.case import load_case
+
+    case = load_case(path)
+    tables = {k: getattr(case, k) for k in RVECase.model_fields if getattr(case, k) is not None}
+    return RVECase(**tables)

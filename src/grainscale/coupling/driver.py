@@ -21,10 +21,13 @@ import numpy as np
 from tqdm import tqdm
 
 from grainscale.config.base import ConfigError, resolved_toml
-from grainscale.config.case import Case, load_case
+from grainscale.config.case import HISTORY_DEM, Case, load_case
+from grainscale.coupling import materials as dem_materials
+from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.io.checkpoint import read_checkpoint, write_checkpoint
 from grainscale.io.history import History
 from grainscale.io.vtk import PVDSeries, write_points_vtu
+from grainscale.mpm.materials import KINDS
 from grainscale.mpm.materials.base import p_q
 from grainscale.mpm.setup import AXES, build_state
 from grainscale.mpm.step import MPMState, SimulationError, kinetic_energy, step
@@ -38,6 +41,19 @@ def history_values(case: Case, s: MPMState) -> dict[str, float]:
     pts = s.points
     out = {"step": s.step, "time": s.time, "dt": s.last_dt,
            "kinetic_energy": kinetic_energy(pts)}
+    # the body as one element: volume-averaged stress, mean strains (seed §4.1)
+    vol = pts.vol.sum()
+    sigma = np.einsum("p,pab->ab", pts.vol, pts.stress) / vol
+    p, q = p_q(sigma[None])
+    a = AXES[case.output.axial_axis]
+    out.update(p=float(p[0]), q=float(q[0]), q_over_p=float(q[0] / p[0]) if p[0] > 0 else 0.0,
+               axial_strain=float(1.0 - np.average(pts.F[:, a, a], weights=pts.vol0)),
+               volumetric_strain=float(np.log(vol / pts.vol0.sum())))
+    rve_fields = [m.point_fields() for m in s.materials if isinstance(m, RVEMaterial)]
+    for key in HISTORY_DEM:  # means over the RVEs of every DEM material
+        values = [f[key] for f in rve_fields if key in f]
+        if values:
+            out[key] = float(np.mean(np.concatenate(values)))
     col = case.output.column
     if col is not None:
         fa, ua = AXES[col.flow_axis], AXES[col.up_axis]
@@ -110,6 +126,21 @@ def restore(path: Path, s: MPMState) -> dict:
 
 
 # --------------------------------------------------------------------------- run
+def _check_geometry(case: Case, case_dir: Path) -> None:
+    """All checks of the solver set-up (points in the grid, boxes that select nodes, ...)
+    before the packings of DEM materials are generated, which can take minutes."""
+    probe = case.model_copy(deep=True)
+    for m in probe.materials.values():
+        if m.type == "dem":
+            m.density = 1.0
+
+    def stand_in(name, cfg, n):
+        return KINDS["linear_elastic"](name, n, density=1.0, youngs_modulus=1.0,
+                                       poisson_ratio=0.0)
+
+    build_state(probe, case_dir, material_factory=stand_in)
+
+
 def run_case(case_path, out, *, max_steps: int | None = None,
              checkpoint_every: int | None = None, resume: bool = False,
              progress: bool = True) -> int:
@@ -119,12 +150,18 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     case = load_case(case_path)
     if case.solver.threads:
         numba.set_num_threads(min(case.solver.threads, numba.config.NUMBA_NUM_THREADS))
-    s = build_state(case, case_path.parent, n_threads=numba.get_num_threads())
     every = checkpoint_every if checkpoint_every is not None else case.output.checkpoint_every
     ckpt = out / CHECKPOINT
     if resume and not ckpt.is_file():
         raise ConfigError(f"--resume: no checkpoint {str(ckpt)!r} to resume from")
+    _check_geometry(case, case_path.parent)  # every input check before long computations
     out.mkdir(parents=True, exist_ok=True)
+    factory = dem_materials.prepare(case, case_path.parent, out, progress)
+    s = build_state(case, case_path.parent, n_threads=numba.get_num_threads(),
+                    material_factory=factory)
+    for mat, ids in zip(s.materials, s.mat_points, strict=True):
+        if hasattr(mat, "initial_stress"):  # RVEs start from their prepared stress
+            s.points.stress[slice(None) if ids is None else ids] = mat.initial_stress()
     (out / "frames").mkdir(exist_ok=True)
     (out / "case.resolved.toml").write_text(resolved_toml(case))
 

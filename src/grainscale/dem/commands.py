@@ -10,9 +10,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from grainscale import __version__
-from grainscale.config import load_toml
 from grainscale.config.base import ConfigError
-from grainscale.config.rve import RVECase, RVEParams
+from grainscale.config.rve import RVECase, RVEParams, load_rve_case
 from grainscale.dem import element_tests, engine
 from grainscale.dem.generate import contact_params, generate
 from grainscale.dem.state import RVEBatch, from_packing
@@ -71,7 +70,7 @@ def _check_out(path: Path, suffixes: tuple[str, ...], key: str) -> None:
 
 
 def dispatch(args: argparse.Namespace) -> int:
-    case = load_toml(args.params, RVECase)
+    case = load_rve_case(args.params)
     if args.rve_command == "generate":
         _check_out(args.out, (".txt", ".h5"), "--out")
         t0 = time.perf_counter()

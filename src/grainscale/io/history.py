@@ -13,13 +13,17 @@ UNITS = {
     "runout_ratio": "-", "height_ratio": "-", "front": "m", "column_height": "m",
     "rigid_fx": "N", "rigid_fy": "N", "rigid_fz": "N", "rigid_depth": "m", "depth": "m",
     "force": "N",
+    "p": "Pa", "q": "Pa", "q_over_p": "-", "axial_strain": "-", "volumetric_strain": "-",
+    "porosity": "-", "coordination": "-", "mean_rotation": "rad",
 }
 
 CONVENTION = ("SI units. Stresses: tension positive internally; p = -tr(sigma)/3 and "
               "q = sqrt(3/2 s:s) are compression positive. rigid_f*: force of the "
               "material on the rigid body. rigid_depth: body displacement along its "
               "prescribed velocity (= depth); force: its resistance, -f . v/|v|. "
-              "runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i.")
+              "runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i. p, q: of the "
+              "volume-averaged stress; axial_strain = 1 - mean F_aa (compression "
+              "positive); volumetric_strain = ln(V/V0) (positive = dilation).")
 
 
 class History:

@@ -1,0 +1,50 @@
+"""Comparing stress paths: the unit element test's multiscale curves against pure DEM.
+
+Acceptance (coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute
+deviation of q/p and of eps_v over the common axial-strain range at most 3 % of each
+curve's range.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def read_columns(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a CSV with '#' comment lines and a header row."""
+    lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
+    cols = lines[0].split(",")
+    data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]], ndmin=2)
+    return {c: data[:, k] for k, c in enumerate(cols)}
+
+
+def deviation(x_ref, y_ref, x, y, x_max: float, n: int = 501) -> tuple[float, float, float]:
+    """(mean |y - y_ref|, range of y_ref, range of y) over [0, x_max] by interpolation."""
+    grid = np.linspace(0.0, x_max, n)
+    a = np.interp(grid, x_ref, y_ref)
+    b = np.interp(grid, x, y)
+    return float(np.mean(np.abs(b - a))), float(np.ptp(a)), float(np.ptp(b))
+
+
+def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
+    """Agreement of two stress paths with columns axial_strain, q_over_p, volumetric_strain."""
+    x_max = float(min(dem["axial_strain"].max(), multiscale["axial_strain"].max()))
+    out = {"axial_strain_compared": x_max}
+    for key in ("q_over_p", "volumetric_strain"):
+        mad, r_dem, r_ms = deviation(dem["axial_strain"], dem[key],
+                                     multiscale["axial_strain"], multiscale[key], x_max)
+        out[f"mad_{key}"] = mad
+        out[f"mad_{key}_over_dem_range"] = mad / r_dem
+        out[f"mad_{key}_over_multiscale_range"] = mad / r_ms
+    keep_dem = dem["axial_strain"] <= x_max + 1e-12
+    keep_ms = multiscale["axial_strain"] <= x_max + 1e-12
+    peak_dem = float(dem["q_over_p"][keep_dem].max())
+    peak_ms = float(multiscale["q_over_p"][keep_ms].max())
+    out.update(peak_q_over_p_dem=peak_dem, peak_q_over_p_multiscale=peak_ms,
+               peak_relative_difference=abs(peak_ms - peak_dem) / peak_dem)
+    out["pass"] = bool(out["peak_relative_difference"] <= 0.03 and all(
+        out[f"mad_{k}_over_{w}_range"] <= 0.03 for k in ("q_over_p", "volumetric_strain")
+        for w in ("dem", "multiscale")))
+    return out
