@@ -54,14 +54,6 @@ def write_rows(path: Path, rows: list[dict[str, float]], title: str) -> None:
     tmp.replace(path)
 
 
-def read_rows(path: Path) -> dict[str, list[float]]:
-    """Columns of a CSV written by `write_rows` (or any CSV with '#' comments)."""
-    lines = [ln for ln in Path(path).read_text().splitlines() if not ln.startswith("#")]
-    cols = lines[0].split(",")
-    data = [[float(v) for v in ln.split(",")] for ln in lines[1:] if ln]
-    return {c: [row[k] for row in data] for k, c in enumerate(cols)}
-
-
 def _check_out(path: Path, suffixes: tuple[str, ...], key: str) -> None:
     if path.suffix not in suffixes:
         raise ConfigError(f"{key} = {str(path)!r}: must end in one of {', '.join(suffixes)}")
