@@ -3,14 +3,15 @@
 Outputs in --out: `case.resolved.toml` (every default filled in, package version),
 `history.csv` (a row every output.interval, plus a final row when the run stops),
 `frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
-for a rigid body), and `checkpoint.h5` every N steps (and at the
-end of the run) when checkpointing is on. `--resume` continues from checkpoint.h5:
-history rows and frames written after it are dropped, so the continued run writes the
-same history.csv as an uninterrupted one.
+for a rigid body), `cost.json` (time per step split into MPM, DEM and other), and
+`checkpoint.h5` every N steps (and at the end of the run) when checkpointing is on.
+`--resume` continues from checkpoint.h5: history rows and frames written after it are
+dropped, so the continued run writes the same history.csv as an uninterrupted one.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time as wallclock
@@ -125,6 +126,39 @@ def restore(path: Path, s: MPMState) -> dict:
     return attrs
 
 
+# --------------------------------------------------------------------------- cost
+def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: float) -> dict:
+    """Time per step split into MPM, DEM and everything else (outputs, checkpoints), and
+    the core-time one RVE costs per step (DEM wall time x threads / RVEs / steps)."""
+    dem = sum(m.seconds for m in s.materials if isinstance(m, RVEMaterial))
+    n_rve = sum(m.batch.n_rve for m in s.materials
+                if isinstance(m, RVEMaterial) and m.batch is not None)
+    threads = numba.get_num_threads()
+    report = {
+        "steps": steps, "points": int(s.points.n), "rves": int(n_rve), "threads": threads,
+        "wall_seconds": wall_seconds,
+        "seconds_per_step": {"mpm": (step_seconds - dem) / steps, "dem": dem / steps,
+                             "other": (wall_seconds - step_seconds) / steps,
+                             "total": wall_seconds / steps},
+    }
+    if n_rve:
+        dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
+        report["core_seconds_per_rve_per_step"] = dem * threads / (n_rve * steps)
+        report["dem_steps_per_rve_per_step"] = dem_steps / (n_rve * steps)
+    return report
+
+
+def format_cost(r: dict) -> str:
+    t = r["seconds_per_step"]
+    text = (f"cost per step: total {t['total'] * 1e3:.3g} ms = MPM {t['mpm'] * 1e3:.3g} ms + "
+            f"DEM {t['dem'] * 1e3:.3g} ms + other {t['other'] * 1e3:.3g} ms "
+            f"({r['steps']} steps, {r['threads']} threads)")
+    if "core_seconds_per_rve_per_step" in r:
+        text += (f"; {r['rves']} RVEs: {r['core_seconds_per_rve_per_step'] * 1e3:.3g} "
+                 f"core-ms per RVE per step ({r['dem_steps_per_rve_per_step']:.0f} DEM steps)")
+    return text
+
+
 # --------------------------------------------------------------------------- run
 def _check_geometry(case: Case, case_dir: Path) -> None:
     """All checks of the solver set-up (points in the grid, boxes that select nodes, ...)
@@ -207,6 +241,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                           "{postfix}]")
     tick = wallclock.perf_counter()
     tick_step = s.step
+    run_start = tick
+    step_seconds = 0.0
     try:
         while True:
             # scheduled outputs at t0 + k * interval (the row of step 0 included)
@@ -233,7 +269,9 @@ def run_case(case_path, out, *, max_steps: int | None = None,
             else:
                 dt = limit
             dt = min(dt, t_end - s.time)
+            t_step = wallclock.perf_counter()
             step(s, dt)
+            step_seconds += wallclock.perf_counter() - t_step
             steps_run += 1
             bar.update(dt)
             now = wallclock.perf_counter()
@@ -252,4 +290,9 @@ def run_case(case_path, out, *, max_steps: int | None = None,
         if every:
             save(ckpt, s, {"rows": n_rows, "frames": n_frames})
     history.close()
+    if steps_run:
+        report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start)
+        (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
+        if progress:
+            print(format_cost(report), file=sys.stderr)
     return code
