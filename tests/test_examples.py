@@ -6,8 +6,8 @@ import pytest
 
 from grainscale.cli import main
 from grainscale.config import load_toml
-from grainscale.config.rve import RVECase
 from grainscale.config.case import load_case
+from grainscale.config.rve import RVECase
 from grainscale.mpm.setup import build_state
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

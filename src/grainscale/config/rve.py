@@ -152,8 +152,9 @@ def load_rve_case(path) -> RVECase:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
-    if set(data) <= set(RVECase.model_fields):
-        return load_toml(path, RVECase)
+    mpm_tables = {"grid", "time", "materials", "bodies", "output"}
+    if set(data) <= set(RVECase.model_fields) or not mpm_tables & set(data):
+        return load_toml(path, RVECase)  # a pure RVE file: unknown tables named alone
     from grainscale.config.case import load_case
 
     case = load_case(path)

@@ -137,16 +137,19 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
         advance_batch(remaining, dt, params.young, params.stiffness_ratio, params.friction,
                       params.damping, params.skin, batch.h, batch.s, batch.v, batch.w,
                       batch.rot, batch.radius, batch.mass, batch.inertia, batch.L,
-                      batch.stress, batch.stiffness, batch.nbr_j, batch.nbr_shift,
+                      batch.stress, batch.stress_servo, batch.stiffness, batch.step_count,
+                      batch.nbr_j, batch.nbr_shift,
                       batch.nbr_count, batch.ft, batch.s_ref, batch.h_ref,
                       batch.need_rebuild, batch.force, batch.torque, batch.x, batch.link,
                       batch.wrapv, e_step, l_mean, control.hdot_fixed, control.l_ctrl,
                       control.servo_mask,
                       control.servo_target, control.servo_gain, max_rate, status, out)
-        remaining -= out[:, 4].astype(np.int64)
-        batch.ncontact[:] = out[:, 0]
-        batch.unbalanced[:] = out[:, 1]
-        batch.kinetic[:] = out[:, 2]
+        done = out[:, 4].astype(np.int64)
+        remaining -= done
+        moved = done > 0  # an RVE that took no step in this call keeps its outputs
+        batch.ncontact[moved] = out[moved, 0]
+        batch.unbalanced[moved] = out[moved, 1]
+        batch.kinetic[moved] = out[moved, 2]
         _check(batch, status, out)
     return batch
 
@@ -204,4 +207,5 @@ def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
         if not np.any(status == OVERFLOW):
             break
     batch.ncontact[:] = out[:, 0]
+    batch.stress_servo[:] = batch.stress
     return batch

@@ -133,9 +133,14 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
             # field moves the pair rigidly with its spin W, so only its strain rate D
             # enters (a spinning cell makes no slip); particle spins w are fluctuations
             # about W.
-            wa0 = ri * w[i, 0] + rj * w[j, 0]
-            wa1 = ri * w[i, 1] + rj * w[j, 1]
-            wa2 = ri * w[i, 2] + rj * w[j, 2]
+            # lever arms to the contact point in the middle of the overlap: a pair
+            # turning rigidly (li + lj = |d|) then makes no slip
+            half = 0.5 * (rr - dist)
+            li = ri - half
+            lj = rj - half
+            wa0 = li * w[i, 0] + lj * w[j, 0]
+            wa1 = li * w[i, 1] + lj * w[j, 1]
+            wa2 = li * w[i, 2] + lj * w[j, 2]
             vr0 = v[j, 0] - v[i, 0] + D00 * d0 + D01 * d1 + D02 * d2 - (wa1 * n2 - wa2 * n1)
             vr1 = v[j, 1] - v[i, 1] + D01 * d0 + D11 * d1 + D12 * d2 - (wa2 * n0 - wa0 * n2)
             vr2 = v[j, 2] - v[i, 2] + D02 * d0 + D12 * d1 + D22 * d2 - (wa0 * n1 - wa1 * n0)
@@ -181,16 +186,16 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
             force[j, 0] -= F0
             force[j, 1] -= F1
             force[j, 2] -= F2
-            # torques: only the tangential part has a lever arm (ri n on i, rj n on j)
+            # torques: only the tangential part has a lever arm (li n on i, lj n on j)
             tq0 = n1 * f2 - n2 * f1
             tq1 = n2 * f0 - n0 * f2
             tq2 = n0 * f1 - n1 * f0
-            ti0 += ri * tq0
-            ti1 += ri * tq1
-            ti2 += ri * tq2
-            torque[j, 0] += rj * tq0
-            torque[j, 1] += rj * tq1
-            torque[j, 2] += rj * tq2
+            ti0 += li * tq0
+            ti1 += li * tq1
+            ti2 += li * tq2
+            torque[j, 0] += lj * tq0
+            torque[j, 1] += lj * tq1
+            torque[j, 2] += lj * tq2
             ncontact += 1
             fsum += fn
             if not homogenise:
@@ -245,7 +250,8 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
 
 @njit(cache=True, fastmath=True)
 def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
-                h, s, v, w, rot, radius, mass, inertia, L, stress, stiffness,
+                h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo, stiffness,
+                step_count,
                 nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
                 force, torque, x, link, wrapv,
                 e_step, l_mean, hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
@@ -260,6 +266,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
     hdot = np.empty((3, 3))
     hinv = np.empty((3, 3))
     hnew = np.empty((3, 3))
+    stiff_scratch = np.empty((3, 3))
     inv_m = np.empty(n)
     inv_i = np.empty(n)
     for i in range(n):
@@ -296,7 +303,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
             for b in range(a, 3):
                 if servo_mask[a, b] == 0:
                     continue
-                err = servo_target[a, b] - 0.5 * (stress[a, b] + stress[b, a])
+                err = servo_target[a, b] - 0.5 * (stress_servo[a, b] + stress_servo[b, a])
                 c = stiffness[a, b] if a == b else 2.0 * stiffness[a, b]
                 if c > 0.0:
                     rate = servo_gain * err / (c * dt)
@@ -316,14 +323,24 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
             for b in range(3):
                 L[a, b] = l_mean[a, b] + hdot[a, 0] * hinv[0, b] + hdot[a, 1] * hinv[1, b] \
                     + hdot[a, 2] * hinv[2, b]
-        # 2-3. contacts, and the stress the caller needs (last step) or the servo reads;
-        # the servo samples it every SERVO_EVERY steps, a delay far shorter than the
-        # stress response time (tens of steps), and keeps L in between
+        # 2-3. contacts, and the stress the caller needs (last step) or the servo reads.
+        # The servo samples its own copy every SERVO_EVERY steps of the RVE's life (a
+        # delay far shorter than the stress response, tens of steps) and keeps L in
+        # between; counting on the RVE's steps, not the call's, makes a run independent
+        # of how it is cut into calls
         last = _step == nsteps - 1
-        ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius,
-                                      L, nbr_j, nbr_shift, nbr_count, ft, force, torque, x,
-                                      table, stress, stiffness,
-                                      last or (servo_on and (done % SERVO_EVERY == 0)))
+        sample = servo_on and step_count[0] % SERVO_EVERY == 0
+        if sample:
+            ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius,
+                                          L, nbr_j, nbr_shift, nbr_count, ft, force, torque,
+                                          x, table, stress_servo, stiffness, True)
+            if last:
+                stress[:, :] = stress_servo
+        else:
+            ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius,
+                                          L, nbr_j, nbr_shift, nbr_count, ft, force, torque,
+                                          x, table, stress, stiff_scratch, last)
+        step_count[0] += 1
         # 5 (first half). new cell, its inverse for the position update
         for a in range(3):
             for b in range(3):
@@ -397,9 +414,9 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
 
 @njit(cache=True, parallel=True)
 def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
-                  h, s, v, w, rot, radius, mass, inertia, L, stress, stiffness,
-                  nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
-                  force, torque, x, link, wrapv,
+                  h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo,
+                  stiffness, step_count, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
+                  need_rebuild, force, torque, x, link, wrapv,
                   e_step, l_mean, hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
                   max_rate, status, out):
     """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs."""
@@ -407,7 +424,8 @@ def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
         status[r] = advance_rve(
             nsteps[r], dt, young, kt_ratio, friction, damping, skin,
             h[r], s[r], v[r], w[r], rot[r], radius[r], mass[r], inertia[r], L[r],
-            stress[r], stiffness[r], nbr_j[r], nbr_shift[r], nbr_count[r], ft[r],
+            stress[r], stress_servo[r], stiffness[r], step_count[r:r + 1], nbr_j[r],
+            nbr_shift[r], nbr_count[r], ft[r],
             s_ref[r], h_ref[r], need_rebuild[r:r + 1], force[r], torque[r], x[r],
             link[r], wrapv[r], e_step[r], l_mean[r], hdot_fixed[r], l_ctrl[r],
             servo_mask[r], servo_target[r], servo_gain, max_rate[r], out[r])

@@ -19,8 +19,9 @@ import numpy as np
 
 # per-RVE arrays that define the physical state (saved in checkpoints and .h5 files)
 STATE_FIELDS = ("h", "s", "v", "w", "rot", "radius", "mass", "inertia", "L", "stress",
-                "stiffness", "h0", "nbr_j", "nbr_shift", "nbr_count", "ft", "s_ref",
-                "h_ref", "need_rebuild", "ncontact", "unbalanced", "kinetic")
+                "stress_servo", "step_count", "stiffness", "h0", "nbr_j", "nbr_shift",
+                "nbr_count", "ft", "s_ref", "h_ref", "need_rebuild", "ncontact", "unbalanced",
+                "kinetic")
 
 
 @dataclass
@@ -37,6 +38,8 @@ class RVEBatch:
     inertia: np.ndarray      # (R,N) moment of inertia 2/5 m r^2 [kg m^2]
     L: np.ndarray            # (R,3,3) mean-field velocity gradient of the last step [1/s]
     stress: np.ndarray       # (R,3,3) Love-Weber Cauchy stress, tension positive [Pa]
+    stress_servo: np.ndarray  # (R,3,3) the stress the servo last sampled [Pa]
+    step_count: np.ndarray   # (R,) int64 DEM steps taken (the servo samples on it)
     stiffness: np.ndarray    # (R,3,3) affine stiffness C_ab for the servo [Pa]
     h0: np.ndarray           # (R,3,3) reference cell for eps_v = ln(V/V0)
     nbr_j: np.ndarray        # (R,N,K) int32 neighbour index
@@ -94,6 +97,7 @@ def allocate(n_rve: int, n_particles: int, capacity: int = 16) -> RVEBatch:
         h=eye.copy(), s=np.zeros((r, n, 3)), v=np.zeros((r, n, 3)), w=np.zeros((r, n, 3)),
         rot=np.zeros((r, n)), radius=np.zeros((r, n)), mass=np.zeros((r, n)),
         inertia=np.zeros((r, n)), L=np.zeros((r, 3, 3)), stress=np.zeros((r, 3, 3)),
+        stress_servo=np.zeros((r, 3, 3)), step_count=np.zeros(r, np.int64),
         stiffness=np.zeros((r, 3, 3)), h0=eye.copy(),
         nbr_j=np.zeros((r, n, k), np.int32), nbr_shift=np.full((r, n, k), 13, np.uint8),
         nbr_count=np.zeros((r, n), np.int32), ft=np.zeros((r, n, k, 3)),

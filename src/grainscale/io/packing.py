@@ -65,9 +65,11 @@ def read_packing(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     data = np.array(rows)
     if np.any(data[:, 3] <= 0):
         bad = int(np.argmax(data[:, 3] <= 0))
-        raise ConfigError(f"{path}: sphere {bad + 1} has radius {data[bad, 3]!r}; must be > 0")
+        raise ConfigError(f"{path}: sphere {bad + 1} has radius {float(data[bad, 3])!r}; "
+                          "must be > 0")
     if np.linalg.det(h) <= 0:
-        raise ConfigError(f"{path}: cell matrix has det = {np.linalg.det(h):.4g}; must be > 0")
+        raise ConfigError(f"{path}: cell matrix has det = {float(np.linalg.det(h)):.4g}; "
+                          "must be > 0")
     return h, data[:, :3].copy(), data[:, 3].copy()
 
 

@@ -1,0 +1,61 @@
+"""Shared helpers of the DEM physics tests (imported by the test modules)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grainscale.config.rve import RVEParams
+from grainscale.dem import engine
+from grainscale.dem.state import RVEBatch, from_packing
+
+# parameters of the small generated packing shared by several tests (unit-element
+# parameters of the seed, fewer particles)
+SMALL_PARAMS = RVEParams(particles=150, preparation={"pressure": 100e3, "porosity": 0.373})
+
+
+def cartesian(batch: RVEBatch, r: int = 0) -> np.ndarray:
+    """x = h s of RVE r (unwrapped)."""
+    return batch.s[r] @ batch.h[r].T
+
+
+def insert_spheres(n: int, rmin: float, rmax: float, porosity: float, seed: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random non-overlapping spheres in a cube (independent of generate.insert_random,
+    which refuses cells below 8 r_max)."""
+    rng = np.random.default_rng(seed)
+    radii = rng.uniform(rmin, rmax, n)
+    side = ((4.0 / 3.0) * np.pi * np.sum(radii**3) / (1.0 - porosity)) ** (1.0 / 3.0)
+    pos = np.zeros((n, 3))
+    for i in range(n):
+        for _ in range(100_000):
+            p = rng.uniform(0.0, side, 3)
+            d = pos[:i] - p
+            d -= side * np.round(d / side)
+            if i == 0 or np.min(np.linalg.norm(d, axis=1) - radii[:i] - radii[i]) > 0:
+                pos[i] = p
+                break
+        else:
+            raise RuntimeError("insertion failed")
+    return np.eye(3) * side, pos, radii
+
+
+def agitated_dense_state(n: int = 48, seed: int = 3, damping: float = 0.0,
+                         friction: float = 0.4) -> tuple[RVEBatch, engine.ContactParams, float]:
+    """A small dense-ish RVE with contacts, tangential history and random velocities.
+
+    Spheres (r 1.0-1.3 mm, density 2500) inserted at porosity 0.70, then compressed by a
+    prescribed volumetric rate with some shear so that many contacts form with history.
+    Returns (batch, params, dt).
+    """
+    h, pos, radii = insert_spheres(n, 1.0e-3, 1.3e-3, 0.70, seed)
+    b = from_packing(h, pos, radii, 2500.0)
+    p = engine.ContactParams(young=5e6, stiffness_ratio=0.7, friction=friction,
+                             damping=damping, skin=0.3e-3)
+    dt = engine.critical_dt(b, p, 0.1)
+    rng = np.random.default_rng(seed + 100)
+    b.v[0] = rng.normal(0.0, 0.02, (n, 3))
+    b.w[0] = rng.normal(0.0, 20.0, (n, 3))
+    lc = np.array([[-80.0, 3.0, 0.0], [0.0, -80.0, 2.0], [1.0, 0.0, -80.0]])
+    engine.advance(b, 600, dt, p, engine.rate_control(1, l_ctrl=lc, max_rate=100.0))
+    assert b.ncontact[0] > n // 2, "helper should produce a contact network"
+    return b, p, dt

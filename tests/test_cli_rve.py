@@ -1,0 +1,83 @@
+"""`grainscale rve ...` refuses bad input before any computation: exit code 2 and a
+message on stderr that names the key and the bad value."""
+
+from __future__ import annotations
+
+import pytest
+
+from grainscale.cli import main
+
+GOOD = """
+[rve]
+particles = 100
+radius_min = 3e-3
+radius_max = 7e-3
+friction = 0.5
+[rve.preparation]
+pressure = 100e3
+"""
+
+
+def run(tmp_path, capsys, text, command="generate", extra=()):
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    out = tmp_path / ("out.txt" if command == "generate" else "out.csv")
+    code = main(["rve", command, str(case), "--out", str(out), "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert not out.exists()  # nothing computed, nothing written
+    return code, err
+
+
+@pytest.mark.parametrize("key, line, shown", [
+    ("rve.radius_min", "radius_min = -3e-3", "-0.003"),
+    ("rve.friction", "friction = -0.2", "-0.2"),
+    ("rve.preparation.porosity", "porosity = 0.55", "0.55"),
+    ("rve.preparation.porosity", "porosity = 0.2", "0.2"),
+    ("rve.partikles", "partikles = 100", "100"),
+])
+def test_bad_value_names_key_and_value(tmp_path, capsys, key, line, shown):
+    name = line.split("=")[0].strip()
+    if name == "porosity":
+        text = GOOD + line + "\n"
+    else:
+        text = GOOD.replace("[rve]\n", f"[rve]\n{line}\n", 1)
+        if name in ("radius_min", "friction"):  # replace, not duplicate, the key
+            text = GOOD.replace(
+                next(ln for ln in GOOD.splitlines() if ln.startswith(name)), line)
+    code, err = run(tmp_path, capsys, text)
+    assert code == 2
+    assert key in err and shown in err, err
+
+
+def test_radius_max_below_radius_min(tmp_path, capsys):
+    text = GOOD.replace("radius_max = 7e-3", "radius_max = 2e-3")
+    code, err = run(tmp_path, capsys, text)
+    assert code == 2
+    assert "radius_max" in err and "0.002" in err and "radius_min" in err, err
+
+
+def test_missing_case_file(tmp_path, capsys):
+    missing = tmp_path / "nope.toml"
+    code = main(["rve", "generate", str(missing), "--out", str(tmp_path / "o.txt"),
+                 "--quiet"])
+    assert code == 2
+    assert "nope.toml" in capsys.readouterr().err
+
+
+def test_missing_packing_file(tmp_path, capsys):
+    code, err = run(tmp_path, capsys, GOOD, command="triaxial",
+                    extra=["--packing", str(tmp_path / "absent.txt")])
+    assert code == 2
+    assert "--packing" in err and "absent.txt" in err, err
+
+
+def test_not_toml(tmp_path, capsys):
+    code, err = run(tmp_path, capsys, "[rve\nparticles = 1")
+    assert code == 2
+    assert "case.toml" in err and "TOML" in err, err
+
+
+def test_misspelled_table_is_named(tmp_path, capsys):
+    code, err = run(tmp_path, capsys, GOOD + "[triaxal]\nstrain_rate = 0.1\n")
+    assert code == 2
+    assert "triaxal" in err and "unknown key" in err, err
