@@ -8,6 +8,7 @@ from grainscale.cli import main
 from grainscale.config import load_toml
 from grainscale.config.case import load_case
 from grainscale.config.rve import RVECase
+from grainscale.coupling.driver import check_geometry
 from grainscale.mpm.setup import build_state
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -19,8 +20,11 @@ RVE_FILES = sorted((EXAMPLES / "rve").glob("*.toml"))
 
 @pytest.mark.parametrize("case", MPM_CASES, ids=lambda p: p.name)
 def test_example_builds(case):
-    s = build_state(load_case(case), case.parent)
-    assert s.points.n > 0 and s.stable_dt() > 0
+    c = load_case(case)
+    check_geometry(c, case.parent)  # every case, DEM materials stood in for
+    if not any(m.type == "dem" for m in c.materials.values()):
+        s = build_state(c, case.parent)
+        assert s.points.n > 0 and s.stable_dt() > 0
 
 
 @pytest.mark.parametrize("path", RVE_FILES, ids=lambda p: p.name)

@@ -160,7 +160,7 @@ def format_cost(r: dict) -> str:
 
 
 # --------------------------------------------------------------------------- run
-def _check_geometry(case: Case, case_dir: Path) -> None:
+def check_geometry(case: Case, case_dir: Path) -> None:
     """All checks of the solver set-up (points in the grid, boxes that select nodes, ...)
     before the packings of DEM materials are generated, which can take minutes."""
     probe = case.model_copy(deep=True)
@@ -188,7 +188,7 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     ckpt = out / CHECKPOINT
     if resume and not ckpt.is_file():
         raise ConfigError(f"--resume: no checkpoint {str(ckpt)!r} to resume from")
-    _check_geometry(case, case_path.parent)  # every input check before long computations
+    check_geometry(case, case_path.parent)  # every input check before long computations
     out.mkdir(parents=True, exist_ok=True)
     factory = dem_materials.prepare(case, case_path.parent, out, progress)
     s = build_state(case, case_path.parent, n_threads=numba.get_num_threads(),
