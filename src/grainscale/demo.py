@@ -1,64 +1,156 @@
-"""`grainscale demo`: a drained triaxial test of the seed's unit-element RVE, end to end.
+"""`grainscale demo`: a reduced unit element test (seed §4.1), multiscale against pure DEM.
 
-Generates the 800-sphere RVE of seed §4.1 (radii 3-7 mm, E = 100 MPa, kt/kn = 0.8,
-mu = 0.5, porosity 0.373 at p = 100 kPa), compresses it axially to 30 % strain with the
-lateral stresses held at 100 kPa, and writes into the output folder:
-`triaxial.csv` (stress path), `triaxial.png` (q/p and eps_v against axial strain),
-`packing.txt` (the prepared packing), and ParaView snapshots of the RVE before and after
-(`rve_initial_*.vtu`, `rve_final_*.vtu`: spheres, contact force network, cell).
-The strain rate (0.5 /s, inertial number ~1e-3) is faster than the 0.1 /s of
-`grainscale rve triaxial` so that the demo finishes in about a minute.
+Writes into the output folder (default ./grainscale-demo):
+- `case.toml`: the case (a cube of 8 material points with an RVE each; reduced from
+  examples/unit_element/case.toml: 300 instead of 800 spheres per RVE, 30 % instead of
+  50 % axial strain, at 0.5 /s instead of 0.1 /s; a 0.1 m cube as there, so the cube's
+  own vibration stays far faster than the loading and the test is quasi-static),
+- `multiscale/`: the MPM x DEM run (history.csv, frames.pvd + frames/*.vtu for ParaView
+  with stress, porosity, coordination, rotation per point, cost.json),
+- `dem.csv`: the pure-DEM drained triaxial test of the same RVE, from the same file,
+- `comparison.png`: q/p and volumetric strain against axial strain, both runs,
+- `metrics.json`: peak q/p difference and mean deviations (acceptance: within 3 %).
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
 
-from tqdm import tqdm
-
-from grainscale.config.rve import RVEParams, TriaxialTest
-from grainscale.dem import element_tests, engine
-from grainscale.dem.commands import write_rows
-from grainscale.dem.generate import contact_params, generate
-from grainscale.io.packing import write_packing
+from grainscale.analysis import read_columns, unit_element_metrics
 from grainscale.io.plots import plot_stress_path
-from grainscale.io.rve_vtk import write_rve_vtk
+
+CASE = """\
+# Reduced unit element test (grainscale demo). Full size: examples/unit_element/case.toml
+title = "unit element test (reduced), seed 4.1"
+
+[grid]                   # one background cell twice the cube, linear shape functions:
+cell_size = {cell}       # the 8 points of the cube deform homogeneously
+cells = [1, 1, 1]
+
+[solver]
+shape = "linear"
+cfl = 0.5
+
+[time]
+end = {end}              # s: {strain:.0%} axial strain at a true strain rate of {rate} /s
+
+[materials.sand]
+type = "dem"
+
+[[bodies]]
+shape = "box"
+material = "sand"
+lo = [0.0, 0.0, 0.0]
+hi = [{side}, {side}, {side}]
+points_per_cell = 4      # sub-cells of half the cube: 2 x 2 x 2 points in it
+
+[[boundaries]]           # bottom: vertical displacement fixed
+type = "roller"
+face = "z-"
+
+[[boundaries]]           # symmetry planes
+type = "roller"
+face = "x-"
+
+[[boundaries]]
+type = "roller"
+face = "y-"
+
+[[boundaries]]           # top: the grid nodes at z = {cell} m move down; a true rate
+type = "velocity"
+face = "z+"
+velocity = {v_top}
+
+[[tractions]]            # confining 100 kPa on the deformed lateral faces
+lo = [{half}, 0.0, 0.0]
+hi = [{side}, {side}, {side}]
+traction = [-100e3, 0.0, 0.0]
+surface = "x+"
+
+[[tractions]]
+lo = [0.0, {half}, 0.0]
+hi = [{side}, {side}, {side}]
+traction = [0.0, -100e3, 0.0]
+surface = "y+"
+
+[damping]
+alpha = {alpha}
+
+[output]
+interval = {interval}
+frame_interval = {frame_interval}
+history = ["time", "axial_strain", "volumetric_strain", "p", "q", "q_over_p", "porosity",
+           "coordination", "kinetic_energy"]
+
+[rve]
+particles = {particles}
+radius_min = 3e-3
+radius_max = 7e-3
+density = 2650.0
+young_modulus = 100e6
+stiffness_ratio = 0.8
+friction = 0.5
+damping = 0.2
+seed = 1
+
+[rve.preparation]
+pressure = 100e3
+porosity = 0.373
+
+[triaxial]
+confining_pressure = 100e3
+axial_strain = {strain}
+strain_rate = {rate}
+rate = "true"            # as the MPM velocity boundary imposes
+output_interval = {row_strain}
+"""
 
 
-def run_demo(out: Path) -> int:
+def demo_case(particles: int = 300, strain: float = 0.3, rate: float = 0.5,
+              alpha: float = 0.0, side: float = 0.1) -> str:
+    """The demo's case file text (a unit element test) for the given reductions."""
+    import math
+
+    end = -math.log(1.0 - strain) / rate
+    return CASE.format(end=f"{end:.6g}", strain=strain, rate=rate,
+                       v_top=f"{-2.0 * side * rate:.6g}", side=side, half=side / 2,
+                       cell=2 * side, alpha=alpha, interval=f"{end / 100:.6g}",
+                       frame_interval=f"{end / 10:.6g}", particles=particles,
+                       row_strain=strain / 100)
+
+
+def run_demo(out: Path, **reductions) -> int:
+    from grainscale.cli import main as grainscale
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    params = RVEParams(preparation={"pressure": 100e3, "porosity": 0.373})
-    test = TriaxialTest(confining_pressure=100e3, axial_strain=0.3, strain_rate=0.5,
-                        output_interval=0.002)
-    print(f"grainscale demo -> {out}/ (first run compiles the kernels, ~30 s)")
-    print("1/2 preparing the RVE: 800 spheres, target porosity 0.373 at p = 100 kPa")
-    batch = generate(params, progress=lambda text: print(f"    {text}"))
-    engine.refresh(batch, contact_params(params))
-    write_packing(out / "packing.txt", batch.h[0], batch.s[0] @ batch.h[0].T, batch.radius[0])
-    write_rve_vtk(out / "rve_initial", batch, params.young_modulus)
-    print("2/2 drained triaxial compression to 30 % axial strain, lateral stress 100 kPa")
-    with tqdm(total=test.axial_strain, file=sys.stderr, unit="",
-              bar_format="    {l_bar}{bar}| {n:.3f}/{total:.2f} strain "
-                         "[{elapsed}<{remaining}] {postfix}") as bar:
-        def on_row(row):
-            bar.update(min(row["axial_strain"], test.axial_strain) - bar.n)
-            bar.set_postfix_str(f"q/p={row['q_over_p']:.3f} eps_v={row['volumetric_strain']:+.4f}")
-
-        rows = element_tests.triaxial(batch, params, test, on_row=on_row)
-    write_rows(out / "triaxial.csv", rows, "grainscale demo: drained triaxial, unit-element RVE")
-    cols = {c: [r[c] for r in rows] for c in rows[0]}
-    plot_stress_path(out / "triaxial.png", {"DEM RVE (800 spheres)": cols},
-                     title="Drained triaxial test, seed §4.1 RVE")
-    write_rve_vtk(out / "rve_final", batch, params.young_modulus)
-    peak = max(rows, key=lambda r: r["q_over_p"])
-    emin = min(r["volumetric_strain"] for r in rows)
-    print(f"peak q/p = {peak['q_over_p']:.3f} at axial strain {peak['axial_strain']:.3f}; "
-          f"final q/p = {rows[-1]['q_over_p']:.3f}; eps_v: min {emin:+.4f}, "
-          f"final {rows[-1]['volumetric_strain']:+.4f}")
-    print(f"wrote {out}/triaxial.csv, triaxial.png, packing.txt, rve_initial_*.vtu, "
-          f"rve_final_*.vtu in {time.perf_counter() - t0:.0f} s")
+    case = out / "case.toml"
+    case.write_text(demo_case(**reductions))
+    say = lambda text: print(text, file=sys.stderr)  # noqa: E731
+    say(f"grainscale demo -> {out}/ (the first run compiles the kernels, ~30 s)")
+    say("1/3 multiscale unit element test: MPM cube, 8 points, an RVE each")
+    if grainscale(["run", str(case), "--out", str(out / "multiscale")]) != 0:
+        return 1
+    say("2/3 pure DEM drained triaxial test of the same RVE")
+    if grainscale(["rve", "triaxial", str(case), "--out", str(out / "dem.csv")]) != 0:
+        return 1
+    say("3/3 comparison")
+    ms = read_columns(out / "multiscale" / "history.csv")
+    dem = read_columns(out / "dem.csv")
+    metrics = unit_element_metrics(dem, ms)
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    plot_stress_path(out / "comparison.png",
+                     {"pure DEM (drained triaxial)": dem, "MPM x DEM (8 points)": ms},
+                     title="Unit element test (reduced): multiscale vs pure DEM")
+    print(f"peak q/p: DEM {metrics['peak_q_over_p_dem']:.3f}, multiscale "
+          f"{metrics['peak_q_over_p_multiscale']:.3f} "
+          f"({100 * metrics['peak_relative_difference']:.1f} % apart); mean deviation of q/p "
+          f"{100 * metrics['mad_q_over_p_over_dem_range']:.1f} % and of eps_v "
+          f"{100 * metrics['mad_volumetric_strain_over_dem_range']:.1f} % of their ranges")
+    print(f"wrote {out}/comparison.png, metrics.json, dem.csv, multiscale/ (history.csv, "
+          f"frames.pvd for ParaView) in {time.perf_counter() - t0:.0f} s")
     return 0

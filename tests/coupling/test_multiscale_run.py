@@ -21,7 +21,6 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "unit_element"
 def small_unit_element(tmp: Path, end: float, interval: float, **rve) -> Path:
     """The unit element example with a small RVE (fewer, smaller spheres) and a short run."""
     case = tomllib.loads((EXAMPLE / "case.toml").read_text())
-    case["bodies"][0]["path"] = str(EXAMPLE / "points.txt")
     case["time"]["end"] = end
     case["output"]["interval"] = interval
     case["output"]["frame_interval"] = 10 * interval
@@ -35,7 +34,7 @@ def small_unit_element(tmp: Path, end: float, interval: float, **rve) -> Path:
 
 @pytest.fixture(scope="module")
 def case_file(tmp_path_factory):
-    return small_unit_element(tmp_path_factory.mktemp("ue"), end=0.12, interval=0.004)
+    return small_unit_element(tmp_path_factory.mktemp("ue"), end=0.012, interval=0.0004)
 
 
 def test_resume_continues_bitwise(case_file, tmp_path):

@@ -93,6 +93,9 @@ class TriaxialTest(StrictModel):
     confining_pressure: float = Field(100e3, gt=0, description="[Pa]")
     axial_strain: float = Field(0.5, gt=0, lt=0.9, description="final (L0-L)/L0")
     strain_rate: float = Field(0.1, gt=0, description="axial compression rate [1/s]")
+    rate: Literal["engineering", "true"] = Field(
+        "engineering", description="constant d((L0-L)/L0)/dt, or constant -dln(L)/dt (as an "
+        "MPM velocity boundary over fixed nodes imposes)")
     axis: Literal["x", "y", "z"] = "z"
     output_interval: float = Field(0.002, gt=0, description="axial strain between rows")
 

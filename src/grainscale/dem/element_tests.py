@@ -77,17 +77,23 @@ def timestep(batch: RVEBatch, params: RVEParams) -> float:
 def triaxial(batch: RVEBatch, params: RVEParams, test: TriaxialTest,
              on_row: Callable[[Row], None] | None = None) -> list[Row]:
     """Drained triaxial compression: the axial cell edge shortens at a constant
-    engineering rate, h_aa(t) = h_aa(0) (1 - rate t); the two lateral normal stresses are
-    servo-held at -confining_pressure; the cell stays rectangular."""
+    engineering rate, h_aa(t) = h_aa(0) (1 - rate t), or at a constant true rate,
+    h_aa(t) = h_aa(0) exp(-rate t); the two lateral normal stresses are servo-held at
+    -confining_pressure; the cell stays rectangular."""
     a = AXES[test.axis]
     dt = timestep(batch, params)
     lateral = {k: -test.confining_pressure for k in range(3) if k != a}
     ctrl = engine.rate_control(batch.n_rve, servo=lateral, max_rate=10 * test.strain_rate,
                                gain=params.numerics.servo_gain)
-    ctrl.hdot_fixed[:, a, :] = -test.strain_rate * batch.h[:, a, :]
+    if test.rate == "true":
+        ctrl.l_ctrl[:, a, a] = -test.strain_rate
+        total = -math.log(1.0 - test.axial_strain)  # time x rate to reach the strain
+    else:
+        ctrl.hdot_fixed[:, a, :] = -test.strain_rate * batch.h[:, a, :]
+        total = test.axial_strain
     l0 = batch.h[0, a, a]
     steps = max(1, round(test.output_interval / (test.strain_rate * dt)))
-    n_rows = math.ceil(test.axial_strain / (steps * test.strain_rate * dt) - 1e-9)
+    n_rows = math.ceil(total / (steps * test.strain_rate * dt) - 1e-9)
 
     def extra(b: RVEBatch, t: float) -> Row:
         return {"axial_strain": float((l0 - b.h[0, a, a]) / l0)}
