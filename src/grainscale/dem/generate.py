@@ -12,7 +12,9 @@
    lowered step by step, re-equilibrating at the target pressure each time: lower
    friction lets the packing densify. A step that overshoots the target is undone from a
    snapshot and retried with a smaller friction decrement, so porosity approaches the
-   target from above.
+   target from above. Small packings can collapse past the target at any decrement;
+   then the compaction friction is bisected instead, each trial compressing the gas
+   state afresh.
 4. The real friction is restored and the packing relaxed (and unloaded) to the target
    pressure until the unbalanced-force ratio is below `preparation.unbalanced`.
 
@@ -24,13 +26,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams
 from grainscale.dem import engine, homogenise
 from grainscale.dem.state import RVEBatch, from_packing
 
 
-class GenerationError(RuntimeError):
-    """The requested packing state could not be reached."""
+class GenerationError(ConfigError):
+    """The requested packing state could not be reached (an input error: the message
+    names the key and the reachable range)."""
 
 
 def contact_params(params: RVEParams, friction: float | None = None,
@@ -123,6 +127,11 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
 
     p_cons = prep.consolidation_pressure or max(prep.pressure, params.young_modulus / 2e4)
 
+    def settle_from(state: RVEBatch, friction: float) -> tuple[RVEBatch, float]:
+        nonlocal batch
+        batch = state.copy()
+        return batch, settle(friction)
+
     def settle(friction: float, pressure: float = p_cons) -> float:
         consolidate(batch, contact_params(params, friction, prep.damping), pressure, dt,
                     prep.max_strain_rate, params.numerics.servo_gain, prep.unbalanced)
@@ -131,6 +140,7 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
             f"p = {homogenise.mean_stress(batch.stress)[0]:.4g} Pa")
         return n
 
+    gas = batch.copy()
     n = settle(mu)
     target, tol = prep.porosity, prep.porosity_tolerance
     if target is not None:
@@ -156,9 +166,10 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
                 if factor > 0.999 and abs(n - target) <= tol:
                     break  # within tolerance and no finer step exists: keep it
                 if factor > 0.999:
-                    raise GenerationError(
-                        f"porosity jumps past rve.preparation.porosity = {target} "
-                        f"± {tol}: {n:.4f} -> {n_trial:.4f}; widen porosity_tolerance")
+                    say(f"porosity jumps past the target ({n:.4f} -> {n_trial:.4f}): "
+                        "bisecting the compaction friction from the gas state")
+                    batch, n = _bisect(gas, settle_from, mu, trial, n, n_trial, target, tol)
+                    break
                 continue
             mu, n = trial, n_trial
     # real friction restored, relaxed (and unloaded) to equilibrium at the target pressure
@@ -170,3 +181,26 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
     batch.h0[:] = batch.h
     batch.rot[:] = 0.0
     return batch
+
+
+def _bisect(gas: RVEBatch, settle_from, mu_hi: float, mu_lo: float, n_hi: float,
+            n_lo: float, target: float, tol: float, max_trials: int = 12):
+    """Compaction friction between mu_lo (porosity n_lo < target) and mu_hi (n_hi >
+    target), each trial compressing the gas state afresh; returns (batch, porosity)."""
+    best = None
+    for _ in range(max_trials):
+        mu = 0.5 * (mu_lo + mu_hi)
+        batch, n = settle_from(gas, mu)
+        if best is None or abs(n - target) < abs(best[1] - target):
+            best = (batch, n)
+        if abs(n - target) <= tol:
+            return batch, n
+        if n > target:
+            mu_hi = mu
+        else:
+            mu_lo = mu
+    raise GenerationError(
+        f"rve.preparation.porosity = {target} ± {tol} not reached by bisecting the "
+        f"compaction friction in [{mu_lo:.4g}, {mu_hi:.4g}]: closest {best[1]:.4f}; this "
+        "packing is too small to set its porosity this finely (raise "
+        "rve.particles or rve.preparation.porosity_tolerance)")
