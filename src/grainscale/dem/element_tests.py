@@ -52,22 +52,29 @@ def state_row(batch: RVEBatch, r: int = 0, time: float = 0.0) -> Row:
 
 
 def _run(batch: RVEBatch, params: RVEParams, control: engine.Control, dt: float,
-         steps_per_row: int, n_rows: int, extra: Callable[[RVEBatch, float], Row],
-         on_row: Callable[[Row], None] | None, reduce: bool = False) -> list[Row]:
+         steps_per_row: int, n_rows: int, extra: Callable[[RVEBatch, float, int], Row],
+         on_row: Callable[[Row], None] | None, reduce: bool = False,
+         every_rve: bool = False):
+    """Rows of RVE 0 (or, with every_rve, a list of rows per RVE of the batch)."""
     cp = contact_params(params)
     engine.refresh(batch, cp)
-    rows = [{**extra(batch, 0.0), **state_row(batch, 0, 0.0)}]
+    rves = range(batch.n_rve if every_rve else 1)
+
+    def rows_now(t: float) -> list[Row]:
+        return [{**extra(batch, t, r), **state_row(batch, r, t)} for r in rves]
+
+    table = [rows_now(0.0)]
     if on_row:
-        on_row(rows[-1])
+        on_row(table[-1][0])
     for k in range(1, n_rows + 1):
         engine.advance(batch, steps_per_row, dt, cp, control)
         if reduce:  # a sheared cell is re-expressed by a compact basis (dem/lattice.py)
             lattice.reduce_cells(batch)
-        t = k * steps_per_row * dt
-        rows.append({**extra(batch, t), **state_row(batch, 0, t)})
+        table.append(rows_now(k * steps_per_row * dt))
         if on_row:
-            on_row(rows[-1])
-    return rows
+            on_row(table[-1][0])
+    per_rve = [[row[r] for row in table] for r in rves]
+    return per_rve if every_rve else per_rve[0]
 
 
 def timestep(batch: RVEBatch, params: RVEParams) -> float:
@@ -75,7 +82,7 @@ def timestep(batch: RVEBatch, params: RVEParams) -> float:
 
 
 def triaxial(batch: RVEBatch, params: RVEParams, test: TriaxialTest,
-             on_row: Callable[[Row], None] | None = None) -> list[Row]:
+             on_row: Callable[[Row], None] | None = None, every_rve: bool = False):
     """Drained triaxial compression: the axial cell edge shortens at a constant
     engineering rate, h_aa(t) = h_aa(0) (1 - rate t), or at a constant true rate,
     h_aa(t) = h_aa(0) exp(-rate t); the two lateral normal stresses are servo-held at
@@ -91,14 +98,14 @@ def triaxial(batch: RVEBatch, params: RVEParams, test: TriaxialTest,
     else:
         ctrl.hdot_fixed[:, a, :] = -test.strain_rate * batch.h[:, a, :]
         total = test.axial_strain
-    l0 = batch.h[0, a, a]
+    l0 = batch.h[:, a, a].copy()
     steps = max(1, round(test.output_interval / (test.strain_rate * dt)))
     n_rows = math.ceil(total / (steps * test.strain_rate * dt) - 1e-9)
 
-    def extra(b: RVEBatch, t: float) -> Row:
-        return {"axial_strain": float((l0 - b.h[0, a, a]) / l0)}
+    def extra(b: RVEBatch, t: float, r: int) -> Row:
+        return {"axial_strain": float((l0[r] - b.h[r, a, a]) / l0[r])}
 
-    return _run(batch, params, ctrl, dt, steps, n_rows, extra, on_row)
+    return _run(batch, params, ctrl, dt, steps, n_rows, extra, on_row, every_rve=every_rve)
 
 
 def undrained(batch: RVEBatch, params: RVEParams, test: UndrainedTest,
@@ -109,13 +116,13 @@ def undrained(batch: RVEBatch, params: RVEParams, test: UndrainedTest,
     lc = np.eye(3) * (0.5 * test.strain_rate)
     lc[a, a] = -test.strain_rate
     ctrl = engine.rate_control(batch.n_rve, l_ctrl=lc)
-    l0 = batch.h[0, a, a]
+    l0 = batch.h[:, a, a].copy()
     steps = max(1, round(test.output_interval / (test.strain_rate * dt)))
     total_log = -math.log(1.0 - test.axial_strain)  # true strain needed
     n_rows = math.ceil(total_log / (steps * test.strain_rate * dt) - 1e-9)
 
-    def extra(b: RVEBatch, t: float) -> Row:
-        return {"axial_strain": float((l0 - b.h[0, a, a]) / l0)}
+    def extra(b: RVEBatch, t: float, r: int) -> Row:
+        return {"axial_strain": float((l0[r] - b.h[r, a, a]) / l0[r])}
 
     return _run(batch, params, ctrl, dt, steps, n_rows, extra, on_row)
 
@@ -161,7 +168,7 @@ def simple_shear(batch: RVEBatch, params: RVEParams, test: ShearTest,
     steps = max(1, round(test.output_interval / (test.strain_rate * dt)))
     n_rows = math.ceil(test.shear_strain / (steps * test.strain_rate * dt) - 1e-9)
 
-    def extra(b: RVEBatch, t: float) -> Row:
+    def extra(b: RVEBatch, t: float, r: int) -> Row:
         return {"shear_strain": test.strain_rate * t}
 
     return _run(batch, params, ctrl, dt, steps, n_rows, extra, on_row, reduce=True)
