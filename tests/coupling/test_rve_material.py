@@ -101,3 +101,20 @@ def test_quasi_static_substeps_follow_the_increment(small_rve):
     # the cells end exactly at (I + dH) h whatever the number of steps
     for r in range(2):
         assert np.allclose(mat.batch.h[r], (np.eye(3) + dH[r]) @ before[r], rtol=1e-12)
+
+
+def test_an_rve_that_cannot_go_on_stops_the_run_cleanly(small_rve):
+    """Flattening a 150-sphere cell below twice the contact range is a simulation error
+    naming the material and the point (the driver then ends with exit code 1 and keeps
+    every output written so far), not a crash."""
+    from grainscale.mpm.step import SimulationError
+
+    params, packing = small_rve
+    mat = RVEMaterial("sand", params, [packing], n_points=2, mode="quasi_static",
+                      strain_per_substep=1e-4)
+    stress = mat.initial_stress()
+    dH = np.zeros((2, 3, 3))
+    dH[1, 2, 2] = -0.05  # point 1 only: 5 % per increment
+    with pytest.raises(SimulationError, match="material 'sand', its point 1: .*too thin"):
+        for _ in range(40):
+            mat.update(dH, 1e-3, stress)

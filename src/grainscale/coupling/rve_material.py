@@ -27,6 +27,7 @@ from grainscale.config.rve import RVEParams
 from grainscale.dem import engine, homogenise, lattice
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_state_arrays
+from grainscale.mpm.step import SimulationError
 
 
 class RVEMaterial:
@@ -79,7 +80,12 @@ class RVEMaterial:
                                 np.ceil(size / self.strain_per_substep)).astype(np.int64)
             dt_dem = self.dt_crit
         ctrl = engine.increment_control(self.batch, dH, nsteps, dt_dem)
-        engine.advance(self.batch, nsteps, dt_dem, self.cp, ctrl)
+        try:
+            engine.advance(self.batch, nsteps, dt_dem, self.cp, ctrl)
+        except engine.RVEError as err:
+            raise SimulationError(
+                f"material {self.name!r}, its point {err.rve}: {err} (the run stops; "
+                "history and checkpoints so far are intact)") from None
         lattice.reduce_cells(self.batch)
         stress[:] = self.batch.stress
         theta = homogenise.mean_rotation(self.batch)

@@ -17,6 +17,15 @@ from grainscale.dem.neighbours import OK, OVERFLOW, TOO_THIN, build
 from grainscale.dem.state import RVEBatch, grow_capacity
 
 
+class RVEError(RuntimeError):
+    """An RVE cannot go on (cell too thin for its spheres, motion not finite); carries
+    the index of the RVE in its batch."""
+
+    def __init__(self, rve: int, message: str):
+        super().__init__(message)
+        self.rve = rve
+
+
 @dataclass(frozen=True)
 class ContactParams:
     """Linear contact law and damping (seed Eq. 7-10)."""
@@ -160,13 +169,13 @@ def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
         grow_capacity(batch, max(need + 4, int(1.5 * batch.capacity)))
     if np.any(status == TOO_THIN):
         r = int(np.argmax(status == TOO_THIN))
-        raise RuntimeError(
+        raise RVEError(r,
             f"RVE {r}: periodic cell too thin for its spheres (a perpendicular width is "
             f"below 2 x (2 r_max + skin)); it is too small or too distorted for this "
             f"deformation; use more particles")
     if np.any(status == NOT_FINITE):
         r = int(np.argmax(status == NOT_FINITE))
-        raise FloatingPointError(
+        raise RVEError(r,
             f"RVE {r}: motion became non-finite (time step too large for the stiffness?)")
 
 

@@ -141,6 +141,7 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
         return n
 
     gas = batch.copy()
+    mu_start = mu
     n = settle(mu)
     target, tol = prep.porosity, prep.porosity_tolerance
     if target is not None:
@@ -168,7 +169,7 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
                 if factor > 0.999:
                     say(f"porosity jumps past the target ({n:.4f} -> {n_trial:.4f}): "
                         "bisecting the compaction friction from the gas state")
-                    batch, n = _bisect(gas, settle_from, mu, trial, n, n_trial, target, tol)
+                    batch, n = _bisect(gas, settle_from, mu_start, target, tol)
                     break
                 continue
             mu, n = trial, n_trial
@@ -183,10 +184,12 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
     return batch
 
 
-def _bisect(gas: RVEBatch, settle_from, mu_hi: float, mu_lo: float, n_hi: float,
-            n_lo: float, target: float, tol: float, max_trials: int = 12):
-    """Compaction friction between mu_lo (porosity n_lo < target) and mu_hi (n_hi >
-    target), each trial compressing the gas state afresh; returns (batch, porosity)."""
+def _bisect(gas: RVEBatch, settle_from, mu_hi: float, target: float, tol: float,
+            max_trials: int = 12):
+    """Compaction friction in [0, mu_hi] (frictionless compaction is the densest, the
+    starting friction gave a looser packing than the target), each trial compressing the
+    gas state afresh; returns (batch, porosity)."""
+    mu_lo = 0.0
     best = None
     for _ in range(max_trials):
         mu = 0.5 * (mu_lo + mu_hi)
