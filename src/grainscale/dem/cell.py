@@ -27,7 +27,10 @@ def volume(h: np.ndarray) -> float:
 def perpendicular_widths(h: np.ndarray) -> np.ndarray:
     """Distance between each pair of opposite faces [m]: w_k = det h / |a_i x a_j|."""
     out = np.empty(3)
-    vol = abs(np.linalg.det(h))
+    # explicit determinant: numba's np.linalg needs SciPy, which is not a dependency
+    vol = abs(h[0, 0] * (h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1])
+              - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
+              + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
     for k in range(3):
         i = (k + 1) % 3
         j = (k + 2) % 3
