@@ -61,16 +61,20 @@ def validate(model: type[M], data: dict[str, Any], source: str = "", prefix: str
         raise ConfigError(format_validation_error(err, source, prefix)) from None
 
 
-def load_toml(path: str | Path, model: type[M]) -> M:
-    """Read and validate a TOML case file."""
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The tables of a TOML file; ConfigError if it is missing or not TOML."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"case file {str(path)!r} does not exist")
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
-    return validate(model, data, source=str(path))
+
+
+def load_toml(path: str | Path, model: type[M]) -> M:
+    """Read and validate a TOML case file."""
+    return validate(model, read_toml(path), source=str(path))
 
 
 def resolved_toml(model: BaseModel) -> str:

@@ -27,7 +27,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from grainscale.config.base import StrictModel
+from grainscale.config.base import StrictModel, load_toml, read_toml
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -143,18 +143,7 @@ def load_rve_case(path) -> RVECase:
     case, so a typo anywhere is still reported), which lets the pure-DEM test of a case's
     RVE run from the very file of the multiscale run.
     """
-    import tomllib
-    from pathlib import Path
-
-    from grainscale.config.base import ConfigError, load_toml
-
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"case file {str(path)!r} does not exist")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    data = read_toml(path)
     mpm_tables = {"grid", "time", "materials", "bodies", "output"}
     if set(data) <= set(RVECase.model_fields) or not mpm_tables & set(data):
         return load_toml(path, RVECase)  # a pure RVE file: unknown tables named alone
