@@ -205,10 +205,12 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     frame_dt = o.frame_interval or o.interval
     if resume:
         c = restore(ckpt, s)
+        # output slots (a step can span several intervals) and what was actually written
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
-        history = History(out / "history.csv", columns, case.title, resume_rows=n_rows)
-        pvd = PVDSeries.load(out / "frames.pvd", keep=n_frames)
-        rigid_pvd = PVDSeries.load(out / "rigid.pvd", keep=n_frames)
+        history = History(out / "history.csv", columns, case.title,
+                          resume_rows=int(c["rows_written"]))
+        pvd = PVDSeries.load(out / "frames.pvd", keep=int(c["frames_written"]))
+        rigid_pvd = PVDSeries.load(out / "rigid.pvd", keep=int(c["rigid_frames_written"]))
     else:
         n_rows = n_frames = 0
         history = History(out / "history.csv", columns, case.title)
@@ -227,6 +229,11 @@ def run_case(case_path, out, *, max_steps: int | None = None,
             v = np.tile(s.rigid.velocity_at(s.time), (len(s.rigid.x), 1))
             write_points_vtu(f, s.rigid.x, {"velocity": v})
             rigid_pvd.add(s.time, f)
+
+    def counters() -> dict[str, int]:
+        return {"rows": n_rows, "frames": n_frames, "rows_written": history.rows,
+                "frames_written": len(pvd.entries),
+                "rigid_frames_written": len(rigid_pvd.entries)}
 
     def due(n_done: int, interval: float) -> bool:
         return s.time >= t0 + n_done * interval - 1e-9 * interval
@@ -256,7 +263,7 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                 while due(n_frames, frame_dt):
                     n_frames += 1
             if every and s.step % every == 0 and s.step > 0 and steps_run > 0:
-                save(ckpt, s, {"rows": n_rows, "frames": n_frames})
+                save(ckpt, s, counters())
             if s.time >= t_end - 1e-12 * (t_end - t0) or (
                     max_steps is not None and steps_run >= max_steps):
                 break
@@ -285,10 +292,10 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     finally:
         bar.close()
     if code == 0:
+        if every:  # saved before the final row, so a resume drops that row again
+            save(ckpt, s, counters())
         if last_row_step != s.step:
-            write_row()  # final row (unscheduled: dropped again on resume)
-        if every:
-            save(ckpt, s, {"rows": n_rows, "frames": n_frames})
+            write_row()  # final row (unscheduled)
     history.close()
     if steps_run:
         report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start)
