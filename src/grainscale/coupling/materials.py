@@ -12,15 +12,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from grainscale.config.base import ConfigError
 from grainscale.config.case import Case
 from grainscale.config.rve import RVEParams
-from grainscale.coupling.rve_material import RVEMaterial
-from grainscale.dem import engine
+from grainscale.coupling.rve_material import RVEMaterial, bulk_density
 from grainscale.dem.commands import load_packing
-from grainscale.dem.generate import contact_params, generate
+from grainscale.dem.generate import generate
 from grainscale.dem.state import RVEBatch
 from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
@@ -67,11 +64,7 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
         if cfg.type != "dem":
             continue
         lib = packing_library(case, name, case_dir, out, progress)
-        cp = contact_params(case.rve)
-        for b in lib:
-            engine.refresh(b, cp)
-        rho = [b.mass[0].sum() / b.volume()[0] for b in lib]
-        cfg.density = float(np.mean(rho))
+        cfg.density = bulk_density(lib)
         libraries[name] = lib
     if not libraries:
         return None

@@ -30,6 +30,11 @@ from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_state
 from grainscale.mpm.step import SimulationError
 
 
+def bulk_density(library: list[RVEBatch]) -> float:
+    """Mean grain mass per cell volume of the packings [kg/m^3]."""
+    return float(np.mean([b.mass[0].sum() / b.volume()[0] for b in library]))
+
+
 class RVEMaterial:
     """Batched RVE material with the MPM material interface (mpm/materials/base.py)."""
 
@@ -47,11 +52,7 @@ class RVEMaterial:
         rng = np.random.default_rng(assignment_seed)
         self.assignment = rng.integers(len(library), size=n_points)
         self.batch = concatenate([library[k] for k in self.assignment]) if n_points else None
-        for b in library:  # only for the bulk density; copies above are the state
-            engine.refresh(b, self.cp)
-        vol = np.array([b.volume()[0] for b in library])
-        mass = np.array([b.mass[0].sum() for b in library])
-        self.density = float(np.mean(mass / vol))  # kg/m^3, bulk density of the packings
+        self.density = bulk_density(library)
         self.dt_crit = min(engine.critical_dt(b, self.cp, params.numerics.timestep_safety)
                            for b in library)
         self.theta_prev = np.zeros(n_points)

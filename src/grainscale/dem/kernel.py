@@ -330,16 +330,13 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
         # of how it is cut into calls
         last = _step == nsteps - 1
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
-        if sample:
-            ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius,
-                                          L, nbr_j, nbr_shift, nbr_count, ft, force, torque,
-                                          x, table, stress_servo, stiffness, True)
-            if last:
-                stress[:, :] = stress_servo
-        else:
-            ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius,
-                                          L, nbr_j, nbr_shift, nbr_count, ft, force, torque,
-                                          x, table, stress, stiff_scratch, last)
+        sig_out = stress_servo if sample else stress
+        stiff_out = stiffness if sample else stiff_scratch
+        ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L,
+                                      nbr_j, nbr_shift, nbr_count, ft, force, torque, x,
+                                      table, sig_out, stiff_out, sample or last)
+        if sample and last:
+            stress[:, :] = stress_servo
         step_count[0] += 1
         # 5 (first half). new cell, its inverse for the position update
         for a in range(3):

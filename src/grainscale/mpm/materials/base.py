@@ -42,6 +42,28 @@ class Material(Protocol):
     def point_fields(self) -> dict[str, np.ndarray]: ...
 
 
+class PlasticState:
+    """State and outputs shared by the perfectly plastic laws: the accumulated plastic
+    strain per point (`eps_p`), with elastic constants E, nu and density set by the law."""
+
+    E: float
+    nu: float
+    density: float
+    eps_p: np.ndarray
+
+    def wave_speed(self) -> float:
+        return p_wave_speed(self.E, self.nu, self.density)
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {"plastic_strain": self.eps_p}
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        self.eps_p[:] = state["plastic_strain"]
+
+    def point_fields(self) -> dict[str, np.ndarray]:
+        return {"plastic_strain": self.eps_p}
+
+
 def lame(E: float, nu: float) -> tuple[float, float]:
     """Lame constants (lambda, G) from Young's modulus E (Pa) and Poisson's ratio nu."""
     return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))

@@ -21,7 +21,12 @@ import math
 import numpy as np
 from numba import njit
 
-from grainscale.mpm.materials.base import add_elastic, lame, p_wave_speed, rotate_objective
+from grainscale.mpm.materials.base import (
+    PlasticState,
+    add_elastic,
+    lame,
+    rotate_objective,
+)
 from grainscale.mpm.parallel import CHUNK, parallel_for
 
 
@@ -73,7 +78,7 @@ def drucker_prager_kernel(dH, stress, eps_p, K, G, M, Mpsi, k, tcut):
     parallel_for(_drucker_prager_task, dH, stress, eps_p, K, G, M, Mpsi, k, tcut)
 
 
-class DruckerPrager:
+class DruckerPrager(PlasticState):
     """Drucker-Prager matched to Mohr-Coulomb in triaxial compression: E (Pa), nu,
     friction and dilation angles (deg), cohesion c (Pa), tension cut-off T (Pa)."""
 
@@ -98,15 +103,3 @@ class DruckerPrager:
     def update(self, dH: np.ndarray, dt: float, stress: np.ndarray) -> None:
         drucker_prager_kernel(dH, stress, self.eps_p, self.K, self.G, self.M, self.Mpsi,
                               self.k, self.tcut)
-
-    def wave_speed(self) -> float:
-        return p_wave_speed(self.E, self.nu, self.density)
-
-    def state(self) -> dict[str, np.ndarray]:
-        return {"plastic_strain": self.eps_p}
-
-    def load_state(self, state: dict[str, np.ndarray]) -> None:
-        self.eps_p[:] = state["plastic_strain"]
-
-    def point_fields(self) -> dict[str, np.ndarray]:
-        return {"plastic_strain": self.eps_p}

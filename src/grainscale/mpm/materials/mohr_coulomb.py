@@ -25,11 +25,11 @@ import numpy as np
 from numba import njit
 
 from grainscale.mpm.materials.base import (
+    PlasticState,
     add_elastic,
     eig_sym3,
     from_principal,
     lame,
-    p_wave_speed,
     rotate_objective,
 )
 from grainscale.mpm.parallel import CHUNK, parallel_for
@@ -118,7 +118,7 @@ def mohr_coulomb_kernel(dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut):
     parallel_for(_mohr_coulomb_task, dH, stress, eps_p, lam, G, sphi, cphi, spsi, coh, tcut)
 
 
-class MohrCoulomb:
+class MohrCoulomb(PlasticState):
     """Mohr-Coulomb: E (Pa), nu, friction and dilation angles (deg), cohesion c (Pa),
     tension cut-off T (Pa, >= 0, capped at the apex c cot(phi))."""
 
@@ -141,15 +141,3 @@ class MohrCoulomb:
     def update(self, dH: np.ndarray, dt: float, stress: np.ndarray) -> None:
         mohr_coulomb_kernel(dH, stress, self.eps_p, self.lam, self.G, self.sphi, self.cphi,
                             self.spsi, self.coh, self.tcut)
-
-    def wave_speed(self) -> float:
-        return p_wave_speed(self.E, self.nu, self.density)
-
-    def state(self) -> dict[str, np.ndarray]:
-        return {"plastic_strain": self.eps_p}
-
-    def load_state(self, state: dict[str, np.ndarray]) -> None:
-        self.eps_p[:] = state["plastic_strain"]
-
-    def point_fields(self) -> dict[str, np.ndarray]:
-        return {"plastic_strain": self.eps_p}
