@@ -37,7 +37,8 @@ class SolverCfg(StrictModel):
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
     dt: Pos | None = None  # s; fixed step (checked against the CFL limit); default: CFL
     gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
-    threads: Annotated[int, Field(ge=0)] = 0  # 0: all available
+    threads: Annotated[int, Field(ge=0)] = 0  # per rank; 0: the cores / ranks per node
+    partition_seed: Annotated[int, Field(ge=0)] = 0  # random point-to-rank assignment (MPI)
 
 
 class TimeCfg(StrictModel):

@@ -168,7 +168,7 @@ def check_geometry(case: Case, case_dir: Path) -> None:
         if m.type == "dem":
             m.density = 1.0
 
-    def stand_in(name, cfg, n):
+    def stand_in(name, cfg, n, local=None):
         return KINDS["linear_elastic"](name, n, density=1.0, youngs_modulus=1.0,
                                        poisson_ratio=0.0)
 

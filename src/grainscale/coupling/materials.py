@@ -69,8 +69,8 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
     if not libraries:
         return None
 
-    def factory(name: str, cfg, n_points: int) -> RVEMaterial:
-        return RVEMaterial(name, case.rve, libraries[name], n_points,
+    def factory(name: str, cfg, n_points: int, local=None) -> RVEMaterial:
+        return RVEMaterial(name, case.rve, libraries[name], n_points, local=local,
                            assignment_seed=cfg.assignment_seed, mode=cfg.time_integration,
                            min_substeps=cfg.min_substeps,
                            strain_per_substep=cfg.strain_per_substep)

@@ -40,7 +40,10 @@ class RVEMaterial:
 
     def __init__(self, name: str, params: RVEParams, library: list[RVEBatch], n_points: int,
                  assignment_seed: int = 0, mode: str = "dynamic", min_substeps: int = 1,
-                 strain_per_substep: float = 1e-5):
+                 strain_per_substep: float = 1e-5, local: np.ndarray | None = None):
+        """n_points: points of this material over all ranks; local: the indices (into
+        them) of the points this process holds (default: all). The packing of each point
+        is drawn for all points with the seed, so it does not depend on the ranks."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         self.name = name
@@ -51,6 +54,9 @@ class RVEMaterial:
         self.cp = contact_params(params)
         rng = np.random.default_rng(assignment_seed)
         self.assignment = rng.integers(len(library), size=n_points)
+        if local is not None:
+            self.assignment = self.assignment[local]
+            n_points = len(local)
         self.batch = concatenate([library[k] for k in self.assignment]) if n_points else None
         self.density = bulk_density(library)
         self.dt_crit = min(engine.critical_dt(b, self.cp, params.numerics.timestep_safety)

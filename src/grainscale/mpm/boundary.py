@@ -138,36 +138,35 @@ def area_ratio(F: np.ndarray, normal: np.ndarray) -> np.ndarray:
     return J * np.linalg.norm(a[..., 0], axis=1)
 
 
-def traction_nodal_forces(tractions: list[Traction], time: float, x: np.ndarray,
-                          lp: np.ndarray, grid: Grid,
-                          F: np.ndarray | None = None) -> np.ndarray | None:
-    """Nodal forces (n_nodes, 3) of the active tractions, or None if there are none.
-
-    Summed point by point in a fixed order (np.add.at is sequential), so the result does
-    not depend on the thread count.
+def traction_loads(tractions: list[Traction], time: float, x: np.ndarray, lp: np.ndarray,
+                   grid: Grid, F: np.ndarray | None = None):
+    """The nodal loads of the active tractions as (node ids (k,), forces (k,3)), one
+    entry per loaded point and node of its linear stencil at the surface position, or
+    None if no traction acts. The caller sums them in fixed point with the internal
+    forces, so the nodal totals do not depend on the order of the points or on ranks.
     """
     from grainscale.mpm.shape import LINEAR, evaluate
 
-    out = None
+    ids_all, f_all = [], []
     for t in tractions:
         k = t.factor(time)
         if k == 0.0:
             continue
         force = t.force
         offset = lp[t.points]
-        if t.current_area and F is not None:
+        if t.current_area and F is not None and len(t.points):
             Fp = F[t.points]
             force = force * area_ratio(Fp, t.normal)[:, None]
             offset = offset * np.linalg.norm(Fp @ t.normal, axis=1)  # stretched half-size
         xs = np.ascontiguousarray(x[t.points] + offset[:, None] * t.normal[None, :])
         base, w, _ = evaluate(xs, np.zeros(len(xs)), grid, LINEAR)
         nx, ny = int(grid.nodes[0]), int(grid.nodes[1])
-        if out is None:
-            out = np.zeros((grid.n_nodes, 3))
         for i in range(2):
             for j in range(2):
                 for kk in range(2):
-                    ids = base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk))
+                    ids_all.append(base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk)))
                     S = w[:, 0, i] * w[:, 1, j] * w[:, 2, kk]
-                    np.add.at(out, ids, (k * S)[:, None] * force)
-    return out
+                    f_all.append((k * S)[:, None] * force)
+    if not ids_all:
+        return None
+    return np.concatenate(ids_all), np.concatenate(f_all)

@@ -61,6 +61,12 @@ def concatenate(sets: list[Points]) -> Points:
         np.concatenate([getattr(s, f.name) for s in sets])) for f in fields(Points)})
 
 
+def take(pts: Points, ids: np.ndarray) -> Points:
+    """The points ids (in that order), as a new contiguous point set."""
+    return Points(**{f.name: np.ascontiguousarray(getattr(pts, f.name)[ids])
+                     for f in fields(Points)})
+
+
 def _lattice(grid: Grid, lo, hi, n: int) -> np.ndarray:
     """Sub-cell centres (n per cell and axis) of all grid cells overlapping the box [lo, hi]."""
     h = grid.cell_size

@@ -16,7 +16,10 @@ from grainscale.config.case import Case
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.materials import KINDS
-from grainscale.mpm.points import concatenate, fill_box, fill_cylinder, make_points, read_points
+from grainscale.distributed import partition
+from grainscale.distributed.comm import Comm
+from grainscale.mpm.points import (concatenate, fill_box, fill_cylinder, make_points,
+                                   read_points, take)
 from grainscale.mpm.rigid import RigidBody
 from grainscale.mpm.step import MPMState
 
@@ -71,10 +74,18 @@ def build_grid(case: Case) -> Grid:
 
 
 def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
-                material_factory=None) -> MPMState:
-    """The solver state at time.start. `material_factory(name, cfg, n_points)` may supply
-    materials of types this module does not know (the coupling's DEM material)."""
+                material_factory=None, comm: Comm | None = None) -> MPMState:
+    """The solver state at time.start.
+
+    `material_factory(name, cfg, n_points, local)` may supply materials of types this
+    module does not know (the coupling's DEM material): n_points is the material's
+    number of points over all ranks, local the indices (into those) this rank owns.
+    Under MPI (`comm` with several ranks) every rank builds and checks the whole point
+    set, then keeps the points it owns (distributed/partition.py); `state.point_ids`
+    holds their global ids, in ascending order.
+    """
     case_dir = Path(case_dir)
+    comm = comm if comm is not None else Comm()
     grid = build_grid(case)
     names = list(case.materials)
     sets = []
@@ -94,16 +105,20 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         lp = np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min())
         sets.append(make_points(x, vol, mcfg.density, names.index(body.material),
                                 velocity=body.velocity, lp=lp))
-    pts = concatenate(sets)
+    everything = concatenate(sets)
+    point_ids = partition.owned(everything.n, comm.size, comm.rank, case.solver.partition_seed)
+    pts = take(everything, point_ids)
     materials, mat_points = [], []
     for k, name in enumerate(names):
         ids = np.flatnonzero(pts.mat == k).astype(np.int64)
+        # this rank's points as indices into the material's global point list
+        local = np.searchsorted(np.flatnonzero(everything.mat == k), point_ids[ids])
         cfg = case.materials[name]
         if cfg.type in KINDS:
             params = cfg.model_dump(exclude={"type"})
             mat = KINDS[cfg.type](name, ids.size, **params)
         elif material_factory is not None:
-            mat = material_factory(name, cfg, ids.size)
+            mat = material_factory(name, cfg, int(np.sum(everything.mat == k)), local)
         else:
             raise ConfigError(f"materials.{name}.type = {cfg.type!r}: unknown material type; "
                               f"valid: {sorted(KINDS)}")
@@ -126,8 +141,10 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         constraints.append(boundary.constraint(nodes, bc.type, normal, end,
                                                velocity=bc.velocity or 0.0))
     tractions = []
+    n_loaded = 0
     for i, t in enumerate(case.tractions):
-        tr = boundary.make_traction(pts.x, pts.vol0, t.lo, t.hi, t.traction, t.surface,
+        tr = boundary.make_traction(everything.x, everything.vol0, t.lo, t.hi, t.traction,
+                                    t.surface,
                                     ramp_time=t.ramp_time,
                                     start_time=t0 if t.start_time is None else t.start_time,
                                     end_time=np.inf if t.end_time is None else t.end_time,
@@ -135,6 +152,10 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         if tr.points.size == 0:
             raise ConfigError(f"tractions[{i}]: box lo = {list(t.lo)}, hi = {list(t.hi)} "
                               "selects no material point")
+        n_loaded += tr.points.size
+        mine = np.isin(tr.points, point_ids)
+        tr.points = np.searchsorted(point_ids, tr.points[mine]).astype(np.int64)
+        tr.force = np.ascontiguousarray(tr.force[mine])
         tractions.append(tr)
     rigid = None
     if case.rigid is not None:
@@ -159,7 +180,8 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         gravity=np.asarray(s.gravity, dtype=np.float64), scheme=s.scheme, shape=s.shape,
         flip=s.flip, cfl=s.cfl, damping=case.damping.alpha,
         damping_end=np.inf if case.damping.end_time is None else case.damping.end_time,
-        time=t0, step=0, n_threads=n_threads)
+        time=t0, step=0, n_threads=n_threads, comm=comm, n_traction_global=n_loaded)
+    state.point_ids = point_ids
     if s.dt is not None and s.dt > state.stable_dt():
         raise ConfigError(f"solver.dt = {s.dt}: above the CFL limit cfl * h / (c + |v|) = "
                           f"{state.stable_dt():.6g} s (cfl = {s.cfl}, h = "

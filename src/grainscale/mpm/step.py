@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from grainscale.distributed.comm import Comm
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import Points
@@ -27,6 +28,10 @@ MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry 
 
 class SimulationError(RuntimeError):
     """The run cannot continue (a point left the grid, a non-finite value appeared)."""
+
+
+class RemoteFailure(SimulationError):
+    """Another rank met a SimulationError (it reports the cause); this rank stops too."""
 
 
 @dataclass
@@ -48,26 +53,33 @@ class MPMState:
     time: float = 0.0  # s
     step: int = 0
     n_threads: int = 1
+    comm: Comm = field(default_factory=Comm)  # ranks sharing the points (serial: one)
+    n_traction_global: int = 0  # loaded points over all ranks (fixed-point bound)
     # --- scratch, rebuilt every step -------------------------------------------------
     vmax: float = 0.0  # m/s, largest point speed after the last step
     last_dt: float = 0.0  # s, the last step taken
 
     def __post_init__(self):
         P = self.points.n
+        self.n_global = self.comm.total(P)  # points over all ranks
         self.ns = stencil_width(self.shape)
-        self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads)
+        self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads, self.comm, self.n_global)
         self.dH = np.zeros((P, 3, 3))
         self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
                           np.zeros((P, 3, 3)))
         self.fext = np.zeros((P, 3))  # N, point forces (none yet: tractions act on nodes)
-        self.vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
+        vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
+        mmax = float(self.points.m.max()) if P else 0.0
+        self.vmax, mmax = self.comm.max([vmax, mmax])
         self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
         self.chunk_out = np.zeros_like(self.transfer.chunk_count)
-        self.mass_tol = MASS_TOL * float(self.points.m.max()) if P else 0.0
+        self.mass_tol = MASS_TOL * mmax
 
     # ---------------------------------------------------------------- time step
     def wave_speed(self) -> float:
-        return max((m.wave_speed() for m in self.materials), default=0.0)
+        """Largest P-wave speed of any material on any rank (m/s)."""
+        c = max((m.wave_speed() for m in self.materials), default=0.0)
+        return float(self.comm.max([c])[0])
 
     def critical_dt(self) -> float:
         """CFL limit dt = h_min / (c + |v|_max) (multiply by the CFL number to use it)."""
@@ -116,23 +128,33 @@ def update_stress(s: MPMState, vgrid: np.ndarray, dt: float) -> None:
     pts = s.points
     velocity_gradient_kernel(vgrid, s.base, s.w, s.dw, s.grid.nodes, s.ns, dt, s.dH, pts.F,
                              pts.vol0, pts.vol)
-    for mat, ids in zip(s.materials, s.mat_points, strict=True):
-        if ids is None:
-            mat.update(s.dH, dt, pts.stress)
-        elif ids.size:
-            sig = pts.stress[ids]
-            mat.update(s.dH[ids], dt, sig)
-            pts.stress[ids] = sig
+    failure = None
+    try:
+        for mat, ids in zip(s.materials, s.mat_points, strict=True):
+            if ids is None:
+                mat.update(s.dH, dt, pts.stress)
+            elif ids.size:
+                sig = pts.stress[ids]
+                mat.update(s.dH[ids], dt, sig)
+                pts.stress[ids] = sig
+    except SimulationError as err:
+        failure = err
+    # every rank learns of a failure in the same step, so none waits for the others
+    if s.comm.any(failure is not None):
+        if failure is not None:
+            raise failure
+        raise RemoteFailure(f"step {s.step}: another rank failed")
 
 
 def nodal_forces(s: MPMState) -> None:
     """f_I = f_int + f_ext (seed Eq. 5-6): stress divergence, gravity, point tractions."""
     pts = s.points
-    s.force = s.transfer.force(pts.m, pts.vol, pts.stress, s.fext, s.gravity,
-                               s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns)
-    ft = boundary.traction_nodal_forces(s.tractions, s.time, pts.x, pts.lp, s.grid, pts.F)
-    if ft is not None:
-        s.force += ft
+    loads = boundary.traction_loads(s.tractions, s.time, pts.x, pts.lp, s.grid, pts.F)
+    s.force, ok = s.transfer.force(pts.m, pts.vol, pts.stress, s.fext, s.gravity,
+                                   s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns,
+                                   extra=loads, n_extra=s.n_traction_global)
+    if not ok:
+        raise SimulationError(f"step {s.step}: non-finite stress or load at a material point")
 
 
 def integrate_grid(s: MPMState, dt: float) -> None:
@@ -167,8 +189,12 @@ def g2p(s: MPMState, dt: float) -> None:
     g = s.grid
     g2p_kernel(s.v_old, s.v_new, s.base, s.w, g.nodes, s.ns, dt, s.flip, g.origin, g.upper,
                pts.x, pts.v, s.chunk_vmax, s.chunk_out)
-    s.vmax = float(s.chunk_vmax.max()) if pts.n else 0.0
-    n_out = int(s.chunk_out.sum())
+    vmax = float(s.chunk_vmax.max()) if pts.n else 0.0
+    g = s.comm.max([vmax if np.isfinite(vmax) else np.inf, float(s.chunk_out.sum())])
+    s.vmax = float(g[0])
+    n_out = int(s.chunk_out.sum())  # reported by the ranks that own them
+    if g[1] > 0 and not n_out:
+        raise RemoteFailure(f"step {s.step}: material points of another rank left the grid")
     if n_out:
         raise SimulationError(f"step {s.step}: {n_out} material point(s) left the grid; "
                               "enlarge [grid] or constrain the boundary")

@@ -309,14 +309,41 @@ def mark_covered_nodes_kernel(x, lp, origin, h, cells, mark):
                     mark[i + nx * (j + ny * k)] = True
 
 
+def stencil_box(base: np.ndarray, ns: int) -> np.ndarray:
+    """(6,) float: minus the lowest and the highest-plus-one node index per axis touched
+    by the stencils starting at base (P,3); "minus" so that one MAX reduction gives the
+    union of the ranks' boxes. An empty set gives an empty box."""
+    if base.shape[0] == 0:
+        return np.full(6, -np.inf)
+    return np.concatenate([-base.min(axis=0), base.max(axis=0) + ns]).astype(np.float64)
+
+
+def box_view(a: np.ndarray, nodes: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """The nodes of `box` (from stencil_box, reduced) as a 3D view [k, j, i, ...] of the
+    nodal array a (n_nodes, c)."""
+    lo = np.maximum((-box[:3]).astype(np.int64), 0)
+    hi = np.minimum(box[3:].astype(np.int64), nodes)
+    grid = a.reshape(int(nodes[2]), int(nodes[1]), int(nodes[0]), a.shape[1])
+    return grid[lo[2]:hi[2], lo[1]:hi[1], lo[0]:hi[0]]
+
+
 class Transfer:
     """Scratch buffers for the fixed-point transfers of one point set on one grid.
 
     n_threads fixes the number of per-thread buffers, hence the threads used by P2G.
+    Under MPI each rank holds a share of the points; `comm` reduces the integer nodal
+    sums over the nodes any rank touches (the active box), and the fixed-point scales
+    come from global maxima and the global point count `n_global`, so every rank gets
+    the nodal values a single process would compute, bit for bit.
     """
 
-    def __init__(self, n_nodes: int, n_points: int, n_threads: int):
+    def __init__(self, n_nodes: int, n_points: int, n_threads: int, comm=None,
+                 n_global: int | None = None):
+        from grainscale.distributed.comm import Comm
+
         self.n_threads = n_threads
+        self.comm = comm if comm is not None else Comm()
+        self.n_global = n_points if n_global is None else n_global
         self.buf4 = np.zeros((n_threads, n_nodes, 4), dtype=np.int64)
         self.buf3 = np.zeros((n_threads, n_nodes, 3), dtype=np.int64)
         self.sum4 = np.zeros((n_nodes, 4), dtype=np.int64)
@@ -324,23 +351,66 @@ class Transfer:
         self.chunk_max = np.zeros((n_points + CHUNK - 1) // CHUNK)
         self.chunk_count = np.zeros((n_points + CHUNK - 1) // CHUNK, dtype=np.int64)
 
+    def _reduce(self, a: np.ndarray, nodes: np.ndarray, box: np.ndarray) -> None:
+        """Sum the integer nodal array a over ranks, only on the nodes of box."""
+        if self.comm.size == 1:
+            return
+        view = box_view(a, nodes, box)
+        block = np.ascontiguousarray(view)
+        self.comm.sum_int(block)
+        view[...] = block
+
     def mass_momentum(self, m, v, base, w, nodes, ns):
         """Nodal mass (n_nodes,) and momentum (n_nodes,3) from the points (seed Eq. 16)."""
         P = m.shape[0]
-        mscale = fixed_point_scale(P * float(m.max())) if P else 1.0
-        pscale = fixed_point_scale(P * float(m.max() * np.abs(v).max())) if P else 1.0
-        p2g_mass_momentum_kernel(m, v, base, w, nodes, ns, mscale, pscale, self.buf4)
-        np.sum(self.buf4, axis=0, out=self.sum4)  # exact: integers
+        local = [float(m.max()) if P else 0.0, float(np.abs(v).max()) if P else 0.0]
+        g = self.comm.max([*local, *stencil_box(base, ns)])
+        mscale = fixed_point_scale(self.n_global * g[0])
+        pscale = fixed_point_scale(self.n_global * g[0] * g[1])
+        if P:
+            p2g_mass_momentum_kernel(m, v, base, w, nodes, ns, mscale, pscale, self.buf4)
+            np.sum(self.buf4, axis=0, out=self.sum4)  # exact: integers
+        else:
+            self.sum4[:] = 0
+        self._reduce(self.sum4, nodes, g[2:])
         mass = self.sum4[:, 0] * (1.0 / mscale)
         mom = self.sum4[:, 1:4] * (1.0 / pscale)
         return mass, mom
 
-    def force(self, m, vol, stress, fext, gravity, h, base, w, dw, nodes, ns):
-        """Nodal internal + external force (n_nodes,3), seed Eq. 5-6."""
+    def force(self, m, vol, stress, fext, gravity, h, base, w, dw, nodes, ns,
+              extra=None, n_extra: int = 0):
+        """Nodal internal + external force (n_nodes,3), seed Eq. 5-6.
+
+        extra = (node ids (k,), forces (k,3)): point loads mapped elsewhere (tractions),
+        added in the same fixed point; n_extra bounds their global number per node.
+        Returns (force, ok): ok is False on every rank if any rank met a non-finite
+        stress or load (the force is then not computed).
+        """
         P = m.shape[0]
-        force_bound_kernel(m, vol, stress, fext, gravity, h, self.chunk_max)
-        fscale = fixed_point_scale(P * float(self.chunk_max.max())) if P else 1.0
-        p2g_force_kernel(m, vol, stress, fext, gravity, base, w, dw, nodes, ns, fscale,
-                         self.buf3)
-        np.sum(self.buf3, axis=0, out=self.sum3)  # exact: integers
-        return self.sum3 * (1.0 / fscale)
+        if P:
+            force_bound_kernel(m, vol, stress, fext, gravity, h, self.chunk_max)
+        local = float(self.chunk_max.max()) if P else 0.0
+        box = stencil_box(base, ns)
+        if extra is not None and len(extra[0]):
+            ids, f = extra
+            local = max(local, float(np.abs(f).max()))
+            k = ids // int(nodes[0] * nodes[1])
+            j = (ids // int(nodes[0])) % int(nodes[1])
+            i = ids % int(nodes[0])
+            ijk = np.stack([i, j, k], axis=1)
+            box = np.maximum(box, np.concatenate([-ijk.min(axis=0), ijk.max(axis=0) + 1]))
+        bad = not np.isfinite(local)
+        g = self.comm.max([0.0 if bad else local, 1.0 if bad else 0.0, *box])
+        if g[1] > 0.0:
+            return None, False
+        fscale = fixed_point_scale((self.n_global + n_extra) * g[0])
+        if P:
+            p2g_force_kernel(m, vol, stress, fext, gravity, base, w, dw, nodes, ns, fscale,
+                             self.buf3)
+            np.sum(self.buf3, axis=0, out=self.sum3)  # exact: integers
+        else:
+            self.sum3[:] = 0
+        if extra is not None and len(extra[0]):
+            np.add.at(self.sum3, extra[0], np.rint(extra[1] * fscale).astype(np.int64))
+        self._reduce(self.sum3, nodes, g[2:])
+        return self.sum3 * (1.0 / fscale), True

@@ -1,0 +1,1 @@
+"""Distributed runs over MPI ranks: the communicator wrapper and the point ownership."""

@@ -1,0 +1,120 @@
+"""The few collectives a distributed run needs, timed, with a serial shortcut.
+
+Every collective used by the solver is here, so that the cost report can split a step
+into computing, waiting and communicating: before each reduction a barrier absorbs the
+load imbalance (timed as `wait_seconds`), and the reduction itself is then pure
+communication (`comm_seconds`). With one rank every call is a no-op or a copy and no
+MPI call is made.
+
+Only exact operations are reduced during a step: maxima (order-independent) and sums of
+int64 fixed-point values (associative), so no result depends on the number of ranks.
+Floating-point sums over points are never reduced; outputs gather the points to rank 0
+and sum there in global point order.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+
+
+class Comm:
+    """A communicator: `mpi` is an mpi4py communicator, or None for a serial run."""
+
+    def __init__(self, mpi=None):
+        self.mpi = mpi if mpi is not None and mpi.Get_size() > 1 else None
+        self.rank = 0 if self.mpi is None else self.mpi.Get_rank()
+        self.size = 1 if self.mpi is None else self.mpi.Get_size()
+        self.wait_seconds = 0.0  # s, in barriers before reductions (load imbalance)
+        self.comm_seconds = 0.0  # s, in the reductions themselves
+        self.bytes_reduced = 0  # bytes this rank contributed to reductions
+
+    @property
+    def root(self) -> bool:
+        return self.rank == 0
+
+    def _sync(self) -> None:
+        t = time.perf_counter()
+        self.mpi.Barrier()
+        self.wait_seconds += time.perf_counter() - t
+
+    def max(self, values) -> np.ndarray:
+        """Element-wise maximum over ranks of a float64 vector (exact)."""
+        a = np.array(values, dtype=np.float64)
+        if self.mpi is None:
+            return a
+        from mpi4py import MPI
+
+        self._sync()
+        t = time.perf_counter()
+        self.mpi.Allreduce(MPI.IN_PLACE, a, op=MPI.MAX)
+        self.comm_seconds += time.perf_counter() - t
+        self.bytes_reduced += a.nbytes
+        return a
+
+    def sum_int(self, a: np.ndarray) -> None:
+        """In-place sum over ranks of a contiguous int64 array (exact)."""
+        if self.mpi is None:
+            return
+        from mpi4py import MPI
+
+        self._sync()
+        t = time.perf_counter()
+        self.mpi.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
+        self.comm_seconds += time.perf_counter() - t
+        self.bytes_reduced += a.nbytes
+
+    def total(self, n: int) -> int:
+        """Sum of an integer over ranks."""
+        a = np.array([n], dtype=np.int64)
+        self.sum_int(a)
+        return int(a[0])
+
+    def any(self, flag: bool) -> bool:
+        """True on every rank if it is true on any."""
+        return bool(self.max([1.0 if flag else 0.0])[0] > 0.0)
+
+    def bcast(self, obj):
+        return obj if self.mpi is None else self.mpi.bcast(obj, root=0)
+
+    def gather(self, obj) -> list | None:
+        """Objects of all ranks, in rank order, on rank 0 (None elsewhere)."""
+        return [obj] if self.mpi is None else self.mpi.gather(obj, root=0)
+
+    def barrier(self) -> None:
+        if self.mpi is not None:
+            self.mpi.Barrier()
+
+    def abort(self, code: int = 1) -> None:
+        """End every rank of the job now (a failure that the others cannot see)."""
+        if self.mpi is not None:
+            sys.stderr.flush()
+            self.mpi.Abort(code)
+
+    def node_ranks(self) -> int:
+        """Ranks sharing this rank's node (for the default thread count)."""
+        if self.mpi is None:
+            return 1
+        from mpi4py import MPI
+
+        return self.mpi.Split_type(MPI.COMM_TYPE_SHARED).Get_size()
+
+
+def launched_by_mpi() -> bool:
+    """True when a process manager started us (mpiexec, srun): importing mpi4py in a
+    plain serial run would initialise MPI for nothing."""
+    keys = ("PMI_RANK", "PMI_SIZE", "PMIX_RANK", "OMPI_COMM_WORLD_SIZE", "MPI_LOCALNRANKS",
+            "HYDRA_CONTROL_FD")
+    return any(k in os.environ for k in keys)
+
+
+def world() -> Comm:
+    """The job's communicator: MPI_COMM_WORLD under mpiexec/srun, serial otherwise."""
+    if not launched_by_mpi():
+        return Comm(None)
+    from mpi4py import MPI
+
+    return Comm(MPI.COMM_WORLD)
