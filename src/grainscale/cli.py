@@ -42,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write a checkpoint every N steps (overrides the case file)")
     run.add_argument("--resume", action="store_true",
                      help="continue from the latest checkpoint in --out")
+    run.add_argument("--threads", type=_positive_int, default=None,
+                     help="numba threads per process (overrides solver.threads)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     rve = sub.add_parser("rve", help="pure DEM work on one periodic RVE")
@@ -71,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    root = True  # under MPI only rank 0 reports input errors (every rank finds them)
     try:
         if args.command == "demo":
             from grainscale.demo import run_demo
@@ -78,18 +81,23 @@ def main(argv: list[str] | None = None) -> int:
             return run_demo(args.out)
         if args.command == "run":
             from grainscale.coupling.driver import run_case
+            from grainscale.distributed.comm import world
 
+            comm = world()
+            root = comm.root
             return run_case(args.case, args.out, max_steps=args.max_steps,
                             checkpoint_every=args.checkpoint_every, resume=args.resume,
-                            progress=not args.quiet)
+                            progress=not args.quiet, threads=args.threads, comm=comm)
         if args.command == "rve":
             from grainscale.dem import commands
 
             return commands.dispatch(args)
     except ConfigError as err:
-        print(f"grainscale: error: {err}", file=sys.stderr)
+        if root:
+            print(f"grainscale: error: {err}", file=sys.stderr)
         return 2
     except FileNotFoundError as err:
-        print(f"grainscale: error: file not found: {err.filename or err}", file=sys.stderr)
+        if root:
+            print(f"grainscale: error: file not found: {err.filename or err}", file=sys.stderr)
         return 2
     return 1

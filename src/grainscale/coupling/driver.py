@@ -3,18 +3,25 @@
 Outputs in --out: `case.resolved.toml` (every default filled in, package version),
 `history.csv` (a row every output.interval, plus a final row when the run stops),
 `frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
-for a rigid body), `cost.json` (time per step split into MPM, DEM and other), and
-`checkpoint.h5` every N steps (and at the end of the run) when checkpointing is on.
-`--resume` continues from checkpoint.h5: history rows and frames written after it are
-dropped, so the continued run writes the same history.csv as an uninterrupted one.
+for a rigid body), `cost.json` (time per step split into MPM, DEM, communication,
+waiting and other), and a checkpoint (coupling/checkpoints.py) every N steps and at the
+end of the run when checkpointing is on. `--resume` continues from it: history rows and
+frames written after it are dropped, so the continued run writes the same history.csv
+as an uninterrupted one.
+
+Under MPI (`mpiexec -n N grainscale run ...`) every rank runs this loop on the points it
+owns; rank 0 writes the outputs from points gathered to it. A SimulationError on any
+rank stops every rank cleanly in the same step (exit code 1); any other failure of a
+rank aborts the whole job at once, so a job never hangs on a dead rank.
 """
 
 from __future__ import annotations
 
 import json
-import math
+import os
 import sys
 import time as wallclock
+import traceback
 from pathlib import Path
 
 import numba
@@ -22,137 +29,61 @@ import numpy as np
 from tqdm import tqdm
 
 from grainscale.config.base import ConfigError, resolved_toml
-from grainscale.config.case import HISTORY_DEM, Case, load_case
+from grainscale.config.case import Case, load_case
+from grainscale.coupling import checkpoints
 from grainscale.coupling import materials as dem_materials
+from grainscale.coupling.outputs import gather, history_values, point_fields
 from grainscale.coupling.rve_material import RVEMaterial
-from grainscale.io.checkpoint import read_checkpoint, write_checkpoint
+from grainscale.distributed.comm import Comm, world
 from grainscale.io.history import History
 from grainscale.io.vtk import PVDSeries, write_points_vtu
 from grainscale.mpm.materials import KINDS
-from grainscale.mpm.materials.base import p_q
-from grainscale.mpm.setup import AXES, build_state
-from grainscale.mpm.step import MPMState, SimulationError, kinetic_energy, step
-
-CHECKPOINT = "checkpoint.h5"
-
-
-# ----------------------------------------------------------------------- outputs
-def history_values(case: Case, s: MPMState) -> dict[str, float]:
-    """Every history quantity available for this case at the current state."""
-    pts = s.points
-    out = {"step": s.step, "time": s.time, "dt": s.last_dt,
-           "kinetic_energy": kinetic_energy(pts)}
-    # the body as one element: volume-averaged stress, mean strains (seed §4.1)
-    vol = pts.vol.sum()
-    sigma = np.einsum("p,pab->ab", pts.vol, pts.stress) / vol
-    p, q = p_q(sigma[None])
-    a = AXES[case.output.axial_axis]
-    out.update(p=float(p[0]), q=float(q[0]), q_over_p=float(q[0] / p[0]) if p[0] > 0 else 0.0,
-               axial_strain=float(1.0 - np.average(pts.F[:, a, a], weights=pts.vol0)),
-               volumetric_strain=float(np.log(vol / pts.vol0.sum())))
-    rve_fields = [m.point_fields() for m in s.materials if isinstance(m, RVEMaterial)]
-    for key in HISTORY_DEM:  # means over the RVEs of every DEM material
-        values = [f[key] for f in rve_fields if key in f]
-        if values:
-            out[key] = float(np.mean(np.concatenate(values)))
-    col = case.output.column
-    if col is not None:
-        fa, ua = AXES[col.flow_axis], AXES[col.up_axis]
-        edge = pts.x[:, fa] + pts.lp  # particle-domain edge, so the initial runout is 0
-        front = float(np.quantile(edge, col.front_quantile)) if col.front_quantile < 1 \
-            else float(edge.max())
-        height = float((pts.x[:, ua] + pts.lp).max()) - col.base
-        g = float(np.linalg.norm(case.solver.gravity))
-        out.update(front=front, column_height=height,
-                   runout_ratio=(front - col.wall - col.length) / col.length,
-                   height_ratio=height / col.height,
-                   t_over_tc=s.time / math.sqrt(col.height / g) if g > 0 else math.nan)
-    if s.rigid is not None:
-        f = s.rigid.force
-        v = s.rigid.velocity
-        n = v / np.linalg.norm(v) if np.any(v) else np.zeros(3)
-        depth = float(np.dot(s.rigid.displacement, n))
-        out.update(rigid_fx=f[0], rigid_fy=f[1], rigid_fz=f[2], rigid_depth=depth,
-                   depth=depth, force=-float(np.dot(f, n)))  # resistance to the motion
-    return out
-
-
-def point_fields(s: MPMState) -> dict[str, np.ndarray]:
-    """Per-point output: position, velocity, displacement, stress, p, q,
-    eps_v = ln(V/V0), material index, and the materials' own fields."""
-    pts = s.points
-    p, q = p_q(pts.stress)
-    fields = {"position": pts.x, "velocity": pts.v, "displacement": pts.x - pts.x0,
-              "stress": pts.stress, "p": p, "q": q, "eps_v": np.log(pts.vol / pts.vol0),
-              "material": pts.mat}
-    for mat, ids in zip(s.materials, s.mat_points, strict=True):
-        for k, a in mat.point_fields().items():
-            if ids is None:
-                fields[k] = a
-            else:
-                full = fields.setdefault(k, np.full((pts.n, *a.shape[1:]), np.nan))
-                full[ids] = a
-    return fields
-
-
-# ---------------------------------------------------------------------- checkpoint
-def save(path: Path, s: MPMState, counters: dict[str, int | float]) -> None:
-    groups = {"points": s.points.arrays()}
-    for i, m in enumerate(s.materials):
-        groups[f"material_{i}"] = m.state()
-    if s.rigid is not None:
-        groups["rigid"] = {"x": s.rigid.x, "displacement": s.rigid.displacement,
-                           "force": s.rigid.force}
-    attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, **counters}
-    write_checkpoint(path, groups, attrs)
-
-
-def restore(path: Path, s: MPMState) -> dict:
-    groups, attrs = read_checkpoint(path)
-    if groups["points"]["x"].shape != s.points.x.shape:
-        raise ConfigError(f"{path}: checkpoint has {groups['points']['x'].shape[0]} points, "
-                          f"the case builds {s.points.n}; was the case file changed?")
-    for k, a in groups["points"].items():
-        getattr(s.points, k)[...] = a
-    for i, m in enumerate(s.materials):
-        m.load_state(groups.get(f"material_{i}", {}))
-    if s.rigid is not None:
-        s.rigid.x[...] = groups["rigid"]["x"]
-        s.rigid.displacement[...] = groups["rigid"]["displacement"]
-        s.rigid.force[...] = groups["rigid"]["force"]
-    s.time = float(attrs["time"])
-    s.step = int(attrs["step"])
-    s.vmax = float(attrs["vmax"])
-    return attrs
+from grainscale.mpm.setup import build_state
+from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError, step
 
 
 # --------------------------------------------------------------------------- cost
 def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: float) -> dict:
-    """Time per step split into MPM, DEM and everything else (outputs, checkpoints), and
-    the core-time one RVE costs per step (DEM wall time x threads / RVEs / steps)."""
+    """Time per step split into MPM, DEM, communication, waiting and everything else
+    (outputs, checkpoints), averaged over ranks, and the core-time one RVE costs per step
+    (DEM wall time x threads / RVEs / steps). Collective: the result is on rank 0."""
     dem = sum(m.seconds for m in s.materials if isinstance(m, RVEMaterial))
     n_rve = sum(m.batch.n_rve for m in s.materials
                 if isinstance(m, RVEMaterial) and m.batch is not None)
+    dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
+    c = s.comm
+    mine = {"dem": dem, "comm": c.comm_seconds, "wait": c.wait_seconds,
+            "mpm": step_seconds - dem - c.comm_seconds - c.wait_seconds,
+            "other": wall_seconds - step_seconds, "rves": n_rve, "dem_steps": dem_steps,
+            "reduced_bytes": c.bytes_reduced}
+    ranks = c.gather(mine)
+    if ranks is None:
+        return {}
     threads = numba.get_num_threads()
+    mean = {k: float(np.mean([r[k] for r in ranks])) / steps
+            for k in ("mpm", "dem", "comm", "wait", "other")}
     report = {
-        "steps": steps, "points": int(s.points.n), "rves": int(n_rve), "threads": threads,
-        "wall_seconds": wall_seconds,
-        "seconds_per_step": {"mpm": (step_seconds - dem) / steps, "dem": dem / steps,
-                             "other": (wall_seconds - step_seconds) / steps,
-                             "total": wall_seconds / steps},
+        "steps": steps, "points": int(s.n_global), "rves": int(sum(r["rves"] for r in ranks)),
+        "ranks": c.size, "threads": threads, "wall_seconds": wall_seconds,
+        "seconds_per_step": {**mean, "total": wall_seconds / steps},
+        "dem_seconds_per_step_max_rank": max(r["dem"] for r in ranks) / steps,
+        "reduced_bytes_per_rank_per_step": float(np.mean([r["reduced_bytes"] for r in ranks]))
+        / steps,
     }
-    if n_rve:
-        dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
-        report["core_seconds_per_rve_per_step"] = dem * threads / (n_rve * steps)
-        report["dem_steps_per_rve_per_step"] = dem_steps / (n_rve * steps)
+    if report["rves"]:
+        dem_all = sum(r["dem"] for r in ranks)
+        report["core_seconds_per_rve_per_step"] = dem_all * threads / (report["rves"] * steps)
+        report["dem_steps_per_rve_per_step"] = (sum(r["dem_steps"] for r in ranks)
+                                                / (report["rves"] * steps))
     return report
 
 
 def format_cost(r: dict) -> str:
     t = r["seconds_per_step"]
     text = (f"cost per step: total {t['total'] * 1e3:.3g} ms = MPM {t['mpm'] * 1e3:.3g} ms + "
-            f"DEM {t['dem'] * 1e3:.3g} ms + other {t['other'] * 1e3:.3g} ms "
-            f"({r['steps']} steps, {r['threads']} threads)")
+            f"DEM {t['dem'] * 1e3:.3g} ms + communication {t['comm'] * 1e3:.3g} ms + waiting "
+            f"{t['wait'] * 1e3:.3g} ms + other {t['other'] * 1e3:.3g} ms ({r['steps']} steps, "
+            f"{r['ranks']} rank(s) x {r['threads']} thread(s))")
     if "core_seconds_per_rve_per_step" in r:
         text += (f"; {r['rves']} RVEs: {r['core_seconds_per_rve_per_step'] * 1e3:.3g} "
                  f"core-ms per RVE per step ({r['dem_steps_per_rve_per_step']:.0f} DEM steps)")
@@ -175,54 +106,108 @@ def check_geometry(case: Case, case_dir: Path) -> None:
     build_state(probe, case_dir, material_factory=stand_in)
 
 
+def set_threads(case: Case, threads: int | None, comm: Comm) -> None:
+    """Numba threads per rank: --threads, else solver.threads, else (under MPI, unless
+    NUMBA_NUM_THREADS is set) the cores of this node shared by its ranks."""
+    n = threads or case.solver.threads
+    if not n and comm.size > 1 and "NUMBA_NUM_THREADS" not in os.environ:
+        n = max(1, len(os.sched_getaffinity(0)) // comm.node_ranks())
+    if n:
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def prepare_materials(case: Case, case_dir: Path, out: Path, comm: Comm, progress: bool):
+    """Packing libraries: rank 0 generates (or reads) and caches them, then the other
+    ranks read the cache; a failure on rank 0 is raised on every rank."""
+    factory = error = None
+    if comm.root:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            factory = dem_materials.prepare(case, case_dir, out, progress)
+        except ConfigError as err:
+            error = str(err)
+    error = comm.bcast(error)
+    if error is not None:
+        raise ConfigError(error)
+    if not comm.root:
+        factory = dem_materials.prepare(case, case_dir, out, progress=False)
+    return factory
+
+
 def run_case(case_path, out, *, max_steps: int | None = None,
              checkpoint_every: int | None = None, resume: bool = False,
-             progress: bool = True) -> int:
-    """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error)."""
+             progress: bool = True, threads: int | None = None,
+             comm: Comm | None = None) -> int:
+    """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error).
+    Input errors are raised as ConfigError before any rank starts working."""
+    comm = comm if comm is not None else world()
     case_path = Path(case_path)
     out = Path(out)
     case = load_case(case_path)
-    if case.solver.threads:
-        numba.set_num_threads(min(case.solver.threads, numba.config.NUMBA_NUM_THREADS))
+    set_threads(case, threads, comm)
     every = checkpoint_every if checkpoint_every is not None else case.output.checkpoint_every
-    ckpt = out / CHECKPOINT
-    if resume and not ckpt.is_file():
-        raise ConfigError(f"--resume: no checkpoint {str(ckpt)!r} to resume from")
+    if resume and not (out / checkpoints.MANIFEST).is_file():
+        raise ConfigError(f"--resume: no checkpoint {str(out / checkpoints.MANIFEST)!r} to "
+                          "resume from")
     check_geometry(case, case_path.parent)  # every input check before long computations
-    out.mkdir(parents=True, exist_ok=True)
-    factory = dem_materials.prepare(case, case_path.parent, out, progress)
+    try:
+        return _run(case, case_path, out, comm, max_steps, every, resume, progress)
+    except BaseException:
+        if comm.size > 1:  # the other ranks would wait for this one forever
+            print(f"grainscale: rank {comm.rank} failed:", file=sys.stderr)
+            traceback.print_exc()
+            comm.abort(2)
+            os._exit(2)  # if the MPI library returns from Abort
+        raise
+
+
+def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: int,
+         resume: bool, progress: bool) -> int:
+    root = comm.root
+    progress = progress and root
+    factory = prepare_materials(case, case_path.parent, out, comm, progress)
     s = build_state(case, case_path.parent, n_threads=numba.get_num_threads(),
-                    material_factory=factory)
+                    material_factory=factory, comm=comm)
     for mat, ids in zip(s.materials, s.mat_points, strict=True):
-        if hasattr(mat, "initial_stress"):  # RVEs start from their prepared stress
+        if hasattr(mat, "initial_stress") and getattr(mat, "batch", None) is not None:
             s.points.stress[slice(None) if ids is None else ids] = mat.initial_stress()
-    (out / "frames").mkdir(exist_ok=True)
-    (out / "case.resolved.toml").write_text(resolved_toml(case))
+    if root:
+        (out / "frames").mkdir(exist_ok=True)
+        (out / "case.resolved.toml").write_text(resolved_toml(case))
 
     columns = ["step", *case.output.history]
     o = case.output
     t0, t_end = case.time.start, case.time.end
     frame_dt = o.frame_interval or o.interval
+    history = pvd = rigid_pvd = None
     if resume:
-        c = restore(ckpt, s)
+        c = checkpoints.restore(out, s)
         # output slots (a step can span several intervals) and what was actually written
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
-        history = History(out / "history.csv", columns, case.title,
-                          resume_rows=int(c["rows_written"]))
-        pvd = PVDSeries.load(out / "frames.pvd", keep=int(c["frames_written"]))
-        rigid_pvd = PVDSeries.load(out / "rigid.pvd", keep=int(c["rigid_frames_written"]))
+        if root:
+            history = History(out / "history.csv", columns, case.title,
+                              resume_rows=int(c["rows_written"]))
+            pvd = PVDSeries.load(out / "frames.pvd", keep=int(c["frames_written"]))
+            rigid_pvd = PVDSeries.load(out / "rigid.pvd",
+                                       keep=int(c["rigid_frames_written"]))
     else:
         n_rows = n_frames = 0
-        history = History(out / "history.csv", columns, case.title)
-        pvd = PVDSeries(out / "frames.pvd")
-        rigid_pvd = PVDSeries(out / "rigid.pvd")
+        if root:
+            history = History(out / "history.csv", columns, case.title)
+            pvd = PVDSeries(out / "frames.pvd")
+            rigid_pvd = PVDSeries(out / "rigid.pvd")
 
     def write_row():
-        history.write(history_values(case, s))
+        view = gather(s)
+        if view is not None:
+            history.write(history_values(case, s, *view))
 
     def write_frame(k: int):
+        view = gather(s)
+        if view is None:
+            return
         f = out / "frames" / f"frame_{k:05d}.vtu"
-        write_points_vtu(f, s.points.x, point_fields(s))
+        write_points_vtu(f, view[0].x, point_fields(*view))
         pvd.add(s.time, f)
         if s.rigid is not None:  # the body's points as their own series
             f = out / "frames" / f"rigid_{k:05d}.vtu"
@@ -231,9 +216,9 @@ def run_case(case_path, out, *, max_steps: int | None = None,
             rigid_pvd.add(s.time, f)
 
     def counters() -> dict[str, int]:
-        return {"rows": n_rows, "frames": n_frames, "rows_written": history.rows,
-                "frames_written": len(pvd.entries),
-                "rigid_frames_written": len(rigid_pvd.entries)}
+        written = {"rows_written": history.rows, "frames_written": len(pvd.entries),
+                   "rigid_frames_written": len(rigid_pvd.entries)} if root else {}
+        return {"rows": n_rows, "frames": n_frames, **written}
 
     def due(n_done: int, interval: float) -> bool:
         return s.time >= t0 + n_done * interval - 1e-9 * interval
@@ -246,6 +231,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                unit="s", dynamic_ncols=True,
                bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} s [{elapsed}<{remaining}"
                           "{postfix}]")
+    comm.wait_seconds = comm.comm_seconds = 0.0  # the loop's own (not start-up's)
+    comm.bytes_reduced = 0
     tick = wallclock.perf_counter()
     tick_step = s.step
     run_start = tick
@@ -263,10 +250,11 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                 while due(n_frames, frame_dt):
                     n_frames += 1
             if every and s.step % every == 0 and s.step > 0 and steps_run > 0:
-                save(ckpt, s, counters())
+                checkpoints.save(out, s, counters())
             if s.time >= t_end - 1e-12 * (t_end - t0) or (
                     max_steps is not None and steps_run >= max_steps):
                 break
+            t_step = wallclock.perf_counter()
             limit = s.stable_dt()
             if fixed_dt is not None:
                 if fixed_dt > limit:
@@ -276,7 +264,6 @@ def run_case(case_path, out, *, max_steps: int | None = None,
             else:
                 dt = limit
             dt = min(dt, t_end - s.time)
-            t_step = wallclock.perf_counter()
             step(s, dt)
             step_seconds += wallclock.perf_counter() - t_step
             steps_run += 1
@@ -287,19 +274,22 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                                     "steps/s", refresh=False)
                 tick, tick_step = now, s.step
     except SimulationError as err:
-        print(f"grainscale: error: {err}", file=sys.stderr)
+        if not isinstance(err, RemoteFailure):  # the rank that failed reports the cause
+            print(f"grainscale: error: {err}", file=sys.stderr)
         code = 1
     finally:
         bar.close()
     if code == 0:
         if every:  # saved before the final row, so a resume drops that row again
-            save(ckpt, s, counters())
+            checkpoints.save(out, s, counters())
         if last_row_step != s.step:
             write_row()  # final row (unscheduled)
-    history.close()
+    if root:
+        history.close()
     if steps_run:
         report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start)
-        (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
-        if progress:
-            print(format_cost(report), file=sys.stderr)
+        if root:
+            (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
+            if progress:
+                print(format_cost(report), file=sys.stderr)
     return code

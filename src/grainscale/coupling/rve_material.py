@@ -26,7 +26,13 @@ import numpy as np
 from grainscale.config.rve import RVEParams
 from grainscale.dem import engine, homogenise, lattice
 from grainscale.dem.generate import contact_params
-from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_state_arrays
+from grainscale.dem.state import (
+    STATE_FIELDS,
+    RVEBatch,
+    concatenate,
+    from_state_arrays,
+    state_arrays,
+)
 from grainscale.mpm.step import SimulationError
 
 
@@ -58,6 +64,7 @@ class RVEMaterial:
             self.assignment = self.assignment[local]
             n_points = len(local)
         self.batch = concatenate([library[k] for k in self.assignment]) if n_points else None
+        self._none = library[0].take(np.zeros(0, np.int64))  # the shape of "no RVE"
         self.density = bulk_density(library)
         self.dt_crit = min(engine.critical_dt(b, self.cp, params.numerics.timestep_safety)
                            for b in library)
@@ -125,7 +132,8 @@ class RVEMaterial:
         return out
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
-        self.batch = from_state_arrays({k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS})
+        batch = from_state_arrays({k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS})
+        self.batch = batch if batch.n_rve else None
         self.theta_prev = np.asarray(state["theta_prev"], float).copy()
         self.assignment = np.asarray(state["assignment"]).copy()
         # no refresh here: re-evaluating contacts would re-project the tangential history
@@ -144,5 +152,18 @@ class RVEMaterial:
             "rve_eps_v": homogenise.volumetric_strain(self.batch),
         }
 
+    @staticmethod
+    def merge_states(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        """One state from the states of several sets of points (checkpoint parts written
+        by different ranks), in order; neighbour-list capacities may differ."""
+        batches = [from_state_arrays({k: p[f"rve_{k}"] for k in STATE_FIELDS})
+                   for p in parts]
+        batches = [b for b in batches if b.n_rve] or batches[:1]
+        out = {f"rve_{k}": v for k, v in state_arrays(concatenate(batches)).items()}
+        for key in ("theta_prev", "assignment"):
+            out[key] = np.concatenate([p[key] for p in parts])
+        return out
+
     def _arrays(self) -> dict[str, np.ndarray]:
-        return {name: getattr(self.batch, name) for name in STATE_FIELDS}
+        b = self.batch if self.batch is not None else self._none
+        return {name: getattr(b, name) for name in STATE_FIELDS}

@@ -13,13 +13,19 @@ import numpy as np
 
 from grainscale.config.base import ConfigError
 from grainscale.config.case import Case
+from grainscale.distributed import partition
+from grainscale.distributed.comm import Comm
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.materials import KINDS
-from grainscale.distributed import partition
-from grainscale.distributed.comm import Comm
-from grainscale.mpm.points import (concatenate, fill_box, fill_cylinder, make_points,
-                                   read_points, take)
+from grainscale.mpm.points import (
+    concatenate,
+    fill_box,
+    fill_cylinder,
+    make_points,
+    read_points,
+    take,
+)
 from grainscale.mpm.rigid import RigidBody
 from grainscale.mpm.step import MPMState
 

@@ -1,0 +1,123 @@
+"""Checkpoints of a (possibly distributed) run: every rank writes its own part, rank 0
+commits them with a manifest.
+
+Layout in the output folder:
+    checkpoint.h5                       manifest: time, step, output counters, rank
+                                        count, the parts folder, the rigid body
+    checkpoint.parts/STEP/rank_R.h5     one part per rank: its points (with their
+                                        global ids) and its materials' state (every
+                                        RVE in full, with its contact history)
+Each file is written to a temporary name and renamed; the manifest is replaced only
+after every rank has finished its part, and older parts are deleted only after that, so
+a job killed at any moment leaves the previous checkpoint complete and valid.
+
+Any number of ranks can resume a checkpoint: each rank reads from every part the rows
+of the points it owns (by global id). Results do not depend on the rank count, so a
+resume on a different number of ranks continues the same history.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from grainscale.config.base import ConfigError
+from grainscale.io.checkpoint import read_checkpoint, write_checkpoint
+from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError
+
+MANIFEST = "checkpoint.h5"
+PARTS = "checkpoint.parts"
+
+
+def _material_ids(s: MPMState, i: int) -> np.ndarray:
+    ids = s.mat_points[i]
+    return s.point_ids if ids is None else s.point_ids[ids]
+
+
+def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
+    """Write this rank's part, then (rank 0) the manifest; collective."""
+    folder = out / PARTS / f"{s.step:010d}"
+    error = None
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        groups = {"points": {**s.points.arrays(), "global_id": s.point_ids}}
+        for i, m in enumerate(s.materials):
+            groups[f"material_{i}"] = {**m.state(), "global_id": _material_ids(s, i)}
+        write_checkpoint(folder / f"rank_{s.comm.rank:05d}.h5", groups, {"step": s.step})
+    except OSError as err:
+        error = err
+    if s.comm.any(error is not None):  # keep the previous checkpoint
+        if error is not None:
+            raise SimulationError(f"writing checkpoint part {folder}: {error}") from None
+        raise RemoteFailure("another rank could not write its checkpoint part")
+    if s.comm.root:
+        groups = {}
+        if s.rigid is not None:
+            groups["rigid"] = {"x": s.rigid.x, "displacement": s.rigid.displacement,
+                               "force": s.rigid.force}
+        attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "ranks": s.comm.size,
+                 "parts": f"{PARTS}/{folder.name}", **counters}
+        write_checkpoint(out / MANIFEST, groups, attrs)
+        for old in (out / PARTS).iterdir():  # superseded parts
+            if old.name != folder.name:
+                shutil.rmtree(old, ignore_errors=True)
+    s.comm.barrier()  # no rank runs ahead into a new part while rank 0 cleans up
+
+
+def _rows(f: h5py.File, group: str, wanted: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The rows of `group` whose global ids are in `wanted` (sorted): ids, arrays."""
+    gid = f[group]["global_id"][()]
+    rows = np.flatnonzero(np.isin(gid, wanted))
+    arrays = {k: f[group][k][rows] if len(rows) else f[group][k][:0]
+              for k in f[group] if k != "global_id"}
+    return gid[rows], arrays
+
+
+def restore(out: Path, s: MPMState) -> dict:
+    """Load the latest checkpoint into s (the rows this rank owns); returns the
+    manifest's attributes. Collective only through nothing: every rank reads alone."""
+    groups, attrs = read_checkpoint(out / MANIFEST)
+    folder = out / str(attrs["parts"])
+    files = [folder / f"rank_{r:05d}.h5" for r in range(int(attrs["ranks"]))]
+    missing = [f for f in files if not f.is_file()]
+    if missing:
+        raise ConfigError(f"{out / MANIFEST}: checkpoint part {missing[0]} is missing")
+    ids, point_parts = [], []
+    mat_ids = [[] for _ in s.materials]
+    mat_parts = [[] for _ in s.materials]
+    for path in files:
+        with h5py.File(path, "r") as f:
+            if f.attrs["step"] != attrs["step"]:
+                raise ConfigError(f"{path}: from step {f.attrs['step']}, the manifest is "
+                                  f"at step {attrs['step']}")
+            g, a = _rows(f, "points", s.point_ids)
+            ids.append(g)
+            point_parts.append(a)
+            for i in range(len(s.materials)):
+                g, a = _rows(f, f"material_{i}", _material_ids(s, i))
+                mat_ids[i].append(g)
+                mat_parts[i].append(a)
+    found = np.concatenate(ids)
+    if found.size != s.points.n:
+        raise ConfigError(f"{out / MANIFEST}: the checkpoint has {found.size} of this "
+                          f"rank's {s.points.n} points; was the case file changed?")
+    order = np.argsort(found)
+    for k in point_parts[0]:
+        getattr(s.points, k)[...] = np.concatenate([p[k] for p in point_parts])[order]
+    for i, m in enumerate(s.materials):
+        merge = getattr(m, "merge_states", None)
+        state = merge(mat_parts[i]) if merge else {
+            k: np.concatenate([p[k] for p in mat_parts[i]]) for k in mat_parts[i][0]}
+        order = np.argsort(np.concatenate(mat_ids[i]))
+        m.load_state({k: v[order] for k, v in state.items()})
+    if s.rigid is not None:
+        s.rigid.x[...] = groups["rigid"]["x"]
+        s.rigid.displacement[...] = groups["rigid"]["displacement"]
+        s.rigid.force[...] = groups["rigid"]["force"]
+    s.time = float(attrs["time"])
+    s.step = int(attrs["step"])
+    s.vmax = float(attrs["vmax"])
+    return attrs

@@ -1,0 +1,167 @@
+"""Distributed runs under `mpiexec` (the mpich wheel installed with the package).
+
+Each test starts a real MPI job from pytest with a timeout, so a hang fails the test
+instead of blocking CI. The reference is always the serial run of the same case: the
+fixed-point nodal sums and the gathered outputs make the history independent of the
+number of ranks and threads, digit for digit.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from grainscale.cli import main
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_multiscale_run import small_unit_element  # noqa: E402
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+MPIEXEC = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which(
+    "mpiexec")
+pytestmark = pytest.mark.skipif(MPIEXEC is None, reason="no mpiexec (install the mpich wheel)")
+
+MOHR_COULOMB = """
+title = "Mohr-Coulomb block slumping under gravity, with a lateral traction"
+[grid]
+cell_size = 0.05
+cells = [6, 4, 5]
+[solver]
+gravity = [0.0, 0.0, -9.81]
+scheme = "MUSL"
+[time]
+end = 0.05
+[materials.soil]
+type = "mohr_coulomb"
+density = 1500.0
+youngs_modulus = 2e6
+poisson_ratio = 0.3
+friction_angle = 25.0
+[[bodies]]
+shape = "box"
+material = "soil"
+lo = [0.0, 0.0, 0.0]
+hi = [0.15, 0.2, 0.2]
+[[boundaries]]
+type = "fixed"
+face = "z-"
+[[boundaries]]
+type = "roller"
+face = "x-"
+[[tractions]]
+lo = [0.0, 0.0, 0.175]
+hi = [0.15, 0.2, 0.2]
+traction = [0.0, 0.0, -2000.0]
+surface = "z+"
+[output]
+interval = 0.005
+history = ["time", "kinetic_energy", "p", "q", "volumetric_strain"]
+"""
+
+
+def mpirun(n: int, args: list[str], timeout: float = 300, script: Path | None = None):
+    """`mpiexec -n n python -m grainscale ARGS` (or python SCRIPT ARGS); CompletedProcess."""
+    env = {**os.environ, "PYTHONPATH": str(SRC), "NUMBA_NUM_THREADS": "1"}
+    target = [str(script)] if script else ["-m", "grainscale"]
+    return subprocess.run([MPIEXEC, "-n", str(n), sys.executable, *target, *args], env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def rve_case(tmp_path_factory):
+    return small_unit_element(tmp_path_factory.mktemp("ue"), end=0.012, interval=0.0004)
+
+
+@pytest.fixture(scope="module")
+def serial(rve_case, tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    assert main(["run", str(rve_case), "--out", str(out), "--quiet", "--threads", "1"]) == 0
+    return (out / "history.csv").read_text()
+
+
+def test_ranks_give_identical_multiscale_history(rve_case, serial, tmp_path):
+    for n in (2, 3):
+        out = tmp_path / f"n{n}"
+        r = mpirun(n, ["run", str(rve_case), "--out", str(out), "--quiet"])
+        assert r.returncode == 0, r.stderr
+        assert (out / "history.csv").read_text() == serial, f"{n} ranks differ"
+    assert len(serial.splitlines()) > 20  # header + a row per step (18 steps)
+
+
+def test_threads_give_identical_multiscale_history(rve_case, serial, tmp_path):
+    out = tmp_path / "t2"
+    assert main(["run", str(rve_case), "--out", str(out), "--quiet", "--threads", "2"]) == 0
+    assert (out / "history.csv").read_text() == serial
+
+
+def test_ranks_give_identical_history_with_tractions(tmp_path):
+    """Phenomenological material, MUSL, gravity and a traction shared by the ranks."""
+    case = tmp_path / "mc.toml"
+    case.write_text(textwrap.dedent(MOHR_COULOMB))
+    assert main(["run", str(case), "--out", str(tmp_path / "n1"), "--quiet"]) == 0
+    ref = (tmp_path / "n1" / "history.csv").read_text()
+    for n in (2, 3):
+        r = mpirun(n, ["run", str(case), "--out", str(tmp_path / f"n{n}"), "--quiet"])
+        assert r.returncode == 0, r.stderr
+        assert (tmp_path / f"n{n}" / "history.csv").read_text() == ref
+
+
+def test_restart_under_mpi_on_any_rank_count(rve_case, serial, tmp_path):
+    out = tmp_path / "part"
+    common = ["run", str(rve_case), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
+    r = mpirun(2, [*common, "--max-steps", "9"])  # last checkpoint at step 8
+    assert r.returncode == 0, r.stderr
+    parts = list((out / "checkpoint.parts").iterdir())
+    assert [p.name for p in parts] == ["0000000009"]  # the end-of-run one, older removed
+    assert len(list(parts[0].iterdir())) == 2  # one part per rank
+    r = mpirun(2, [*common, "--resume", "--max-steps", "4"])  # same rank count
+    assert r.returncode == 0, r.stderr
+    r = mpirun(3, [*common, "--resume"])  # and a different one
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == serial
+
+
+INJECT = """
+import sys
+from mpi4py import MPI
+from grainscale.coupling import rve_material
+from grainscale.mpm.step import SimulationError
+KIND = {"bug": RuntimeError, "simulation": SimulationError}[sys.argv.pop(1)]
+original = rve_material.RVEMaterial.update
+calls = [0]
+
+def update(self, dH, dt, stress):
+    calls[0] += 1
+    if MPI.COMM_WORLD.rank == 1 and calls[0] == 7:
+        raise KIND("injected failure of rank 1")
+    original(self, dH, dt, stress)
+
+rve_material.RVEMaterial.update = update
+from grainscale.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("kind,code", [("bug", None), ("simulation", 1)])
+def test_failing_rank_ends_the_job(kind, code, rve_case, serial, tmp_path):
+    """An unexpected exception on one rank aborts the job; a simulation error stops all
+    ranks cleanly with exit code 1. Neither hangs, and the last checkpoint resumes."""
+    script = tmp_path / "inject.py"
+    script.write_text(INJECT)
+    out = tmp_path / "out"
+    args = [kind, "run", str(rve_case), "--out", str(out), "--quiet", "--checkpoint-every",
+            "3"]
+    t = time.monotonic()
+    r = mpirun(2, args, timeout=120, script=script)
+    assert r.returncode != 0
+    if code is not None:
+        assert r.returncode == code
+    assert "injected failure of rank 1" in r.stderr
+    assert time.monotonic() - t < 60  # seconds (a start-up with warm numba caches is ~3 s)
+    assert main(["run", str(rve_case), "--out", str(out), "--quiet", "--resume"]) == 0
+    assert (out / "history.csv").read_text() == serial
