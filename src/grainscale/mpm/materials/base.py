@@ -133,7 +133,7 @@ def add_elastic(dH, lam, G, sig):
         sig[i, i] += lam * tr
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, inline="always")
 def eig_sym3(A, vals, vecs):
     """Eigen-decomposition of a symmetric 3x3 A by cyclic Jacobi rotations.
 

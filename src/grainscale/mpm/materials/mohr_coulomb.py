@@ -35,7 +35,7 @@ from grainscale.mpm.materials.base import (
 from grainscale.mpm.parallel import CHUNK, parallel_for
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, inline="always")
 def mc_return(s, lam, G, sphi, cphi, spsi, coh, tcut, out):
     """Return the principal trial stresses s (3,) (descending) onto the Mohr-Coulomb
     surface; writes out (3,) and returns the plastic multiplier sum (0 if elastic)."""
