@@ -22,7 +22,7 @@ Every configuration runs the same case with `--max-steps` in its own process gro
 (`mpiexec -n R ... --threads T`); packings are generated once and reused.
 
     PYTHONPATH=src python benchmarks/scaling.py [--case examples/column_collapse/quick.toml]
-        [--configs 1x1 2x1 1x2] [--steps 30] [--weak-axis y] [--repeats 1]
+        [--configs 1x1 2x1 1x2] [--steps 30] [--weak-axis y] [--repeats 1] [--plot PNG]
 
 On a cluster, run it inside an allocation with the configurations to study (e.g.
 --configs 1x1 2x1 4x1 8x1 16x1 32x1); the last line printed is one JSON object.
@@ -166,6 +166,8 @@ def main() -> None:
     ap.add_argument("--weak-axis", default="y", help="axis the weak-scaling case grows along")
     ap.add_argument("--no-weak", action="store_true")
     ap.add_argument("--work", type=Path, default=Path("scaling-work"))
+    ap.add_argument("--plot", type=Path, default=None,
+                    help="PNG of speedup against cores with the Amdahl/Gustafson bounds")
     args = ap.parse_args()
     configs = [parse_config(c) for c in args.configs]
     args.work.mkdir(parents=True, exist_ok=True)
@@ -224,7 +226,45 @@ def main() -> None:
               "bound = Gustafson with s_profile")
         table(weak, weak=True)
         result["weak"] = weak
+    if args.plot:
+        plot(result, s, args.plot)
     print(json.dumps(result, default=float))
+
+
+def plot(result: dict, s: float, path: Path) -> None:
+    """Measured (scaled) speedups against cores, with the ideal line and the Amdahl and
+    Gustafson curves of s_profile up to 1024 cores (log axes)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = np.logspace(0, 10, 200, base=2)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
+    def amdahl(f):
+        return 1 / (f + (1 - f) / n)
+
+    def gustafson(f):
+        return f + (1 - f) * n
+
+    for a, key, law, label in [(ax[0], "strong", amdahl, "Amdahl"),
+                               (ax[1], "weak", gustafson, "Gustafson")]:
+        a.loglog(n, n, "k:", lw=1, label="ideal")
+        a.loglog(n, law(s), "C0-", label=f"{label}, measured s = {s:.2g}")
+        a.loglog(n, law(0.023), "C3--", label=f"{label}, seed's s = 0.023")
+        for r in result.get(key, []):
+            c = r["ranks"] * r["threads"]
+            marker = "o" if r["threads"] == 1 else "s"
+            a.loglog(c, r["speedup"], marker, color="C2" if r["threads"] == 1 else "C1",
+                     ms=7, label=f"{r['ranks']} rank(s) x {r['threads']} thread(s)")
+        a.set_xlabel("cores (ranks x threads)")
+        a.set_ylabel("speedup" if key == "strong" else "scaled speedup")
+        a.set_title(f"{key} scaling")
+        a.grid(True, which="both", alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle(Path(result["case"]).name)
+    fig.savefig(path, dpi=120)
+    print(f"plot: {path}")
 
 
 if __name__ == "__main__":

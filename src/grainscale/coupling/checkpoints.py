@@ -4,7 +4,7 @@ commits them with a manifest.
 Layout in the output folder:
     checkpoint.h5                       manifest: time, step, output counters, rank
                                         count, the parts folder, the rigid body
-    checkpoint.parts/STEP/rank_R.h5     one part per rank: its points (with their
+    checkpoint.parts/STEP_N/rank_R.h5   one part per rank (N ranks): its points (with their
                                         global ids) and its materials' state (every
                                         RVE in full, with its contact history)
 Each file is written to a temporary name and renamed; the manifest is replaced only
@@ -39,7 +39,9 @@ def _material_ids(s: MPMState, i: int) -> np.ndarray:
 
 def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
     """Write this rank's part, then (rank 0) the manifest; collective."""
-    folder = out / PARTS / f"{s.step:010d}"
+    # the rank count is in the name: a resume on other ranks that saves at the same step
+    # must not overwrite the parts the current manifest still names
+    folder = out / PARTS / f"{s.step:010d}_{s.comm.size}"
     error = None
     try:
         folder.mkdir(parents=True, exist_ok=True)
