@@ -120,6 +120,10 @@ def test_resume_gives_the_same_history(tmp_path):
     assert (part / "history.csv").read_text() == (full / "history.csv").read_text()
     assert (part / "frames.pvd").read_text() == (full / "frames.pvd").read_text()
     assert (part / "rigid.pvd").read_text() == (full / "rigid.pvd").read_text()
+    # resuming a finished run changes nothing (no second final row, same dt column)
+    assert main(["run", str(case), "--out", str(part), "--checkpoint-every", "10",
+                 "--resume", "--quiet"]) == 0
+    assert (part / "history.csv").read_text() == (full / "history.csv").read_text()
 
 
 def test_bad_case_exit_code_2(tmp_path, capsys):

@@ -12,9 +12,11 @@ import subprocess
 import sys
 import textwrap
 import time
+import tomllib
 from pathlib import Path
 
 import pytest
+import tomli_w
 
 from grainscale.cli import main
 
@@ -74,7 +76,13 @@ def mpirun(n: int, args: list[str], timeout: float = 300, script: Path | None = 
 
 @pytest.fixture(scope="module")
 def rve_case(tmp_path_factory):
-    return small_unit_element(tmp_path_factory.mktemp("ue"), end=0.012, interval=0.0004)
+    """The small unit element with a library of 4 packings, so that RVEs differ (the
+    CFL wave speed once depended on which RVEs shared a rank)."""
+    path = small_unit_element(tmp_path_factory.mktemp("ue"), end=0.012, interval=0.0004)
+    case = tomllib.loads(path.read_text())
+    case["materials"]["sand"]["library"] = 4
+    path.write_text(tomli_w.dumps(case))
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -183,3 +191,13 @@ def test_fresh_compilation_and_cached_kernels_agree(tmp_path):
                         str(tmp_path / name), "--quiet"], env=env, check=True, timeout=600)
     cold = (tmp_path / "cold" / "history.csv").read_text()
     assert cold == (tmp_path / "warm" / "history.csv").read_text()
+
+
+def test_srun_tasks_that_mpi_does_not_join_are_refused(tmp_path, monkeypatch, capsys):
+    """`srun --mpi=none -n 4` would run the whole case four times into one folder."""
+    case = tmp_path / "mc.toml"
+    case.write_text(textwrap.dedent(MOHR_COULOMB))
+    monkeypatch.setenv("SLURM_STEP_NUM_TASKS", "4")
+    assert main(["run", str(case), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert "srun started 4 tasks but MPI sees 1 rank" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

@@ -60,7 +60,8 @@ def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
         if s.rigid is not None:
             groups["rigid"] = {"x": s.rigid.x, "displacement": s.rigid.displacement,
                                "force": s.rigid.force}
-        attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "ranks": s.comm.size,
+        attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "last_dt": s.last_dt,
+                 "ranks": s.comm.size,
                  "parts": f"{PARTS}/{folder.name}", **counters}
         write_checkpoint(out / MANIFEST, groups, attrs)
         for old in (out / PARTS).iterdir():  # superseded parts
@@ -80,7 +81,8 @@ def _rows(f: h5py.File, group: str, wanted: np.ndarray) -> tuple[np.ndarray, dic
 
 def restore(out: Path, s: MPMState) -> dict:
     """Load the latest checkpoint into s (the rows this rank owns); returns the
-    manifest's attributes. Collective only through nothing: every rank reads alone."""
+    manifest's attributes. Collective: every rank reads alone, then the ranks agree on
+    whether all found their points, so an error is raised on every rank or none."""
     groups, attrs = read_checkpoint(out / MANIFEST)
     folder = out / str(attrs["parts"])
     files = [folder / f"rank_{r:05d}.h5" for r in range(int(attrs["ranks"]))]
@@ -103,9 +105,9 @@ def restore(out: Path, s: MPMState) -> dict:
                 mat_ids[i].append(g)
                 mat_parts[i].append(a)
     found = np.concatenate(ids)
-    if found.size != s.points.n:
-        raise ConfigError(f"{out / MANIFEST}: the checkpoint has {found.size} of this "
-                          f"rank's {s.points.n} points; was the case file changed?")
+    if s.comm.any(found.size != s.points.n):
+        raise ConfigError(f"{out / MANIFEST}: the checkpoint does not hold the points this "
+                          "case builds; was the case file changed?")
     order = np.argsort(found)
     for k in point_parts[0]:
         getattr(s.points, k)[...] = np.concatenate([p[k] for p in point_parts])[order]
@@ -122,4 +124,5 @@ def restore(out: Path, s: MPMState) -> dict:
     s.time = float(attrs["time"])
     s.step = int(attrs["step"])
     s.vmax = float(attrs["vmax"])
+    s.last_dt = float(attrs.get("last_dt", 0.0))
     return attrs

@@ -43,17 +43,19 @@ from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError, step
 
 
 # --------------------------------------------------------------------------- cost
-def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: float) -> dict:
+def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: float,
+                comm_seconds: float = 0.0, wait_seconds: float = 0.0) -> dict:
     """Time per step split into MPM, DEM, communication, waiting and everything else
     (outputs, checkpoints), averaged over ranks, and the core-time one RVE costs per step
-    (DEM wall time x threads / RVEs / steps). Collective: the result is on rank 0."""
+    (DEM wall time x threads / RVEs / steps). comm_seconds and wait_seconds are those
+    spent inside the steps. Collective: the result is on rank 0."""
     dem = sum(m.seconds for m in s.materials if isinstance(m, RVEMaterial))
     n_rve = sum(m.batch.n_rve for m in s.materials
                 if isinstance(m, RVEMaterial) and m.batch is not None)
     dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
     c = s.comm
-    mine = {"dem": dem, "comm": c.comm_seconds, "wait": c.wait_seconds,
-            "mpm": step_seconds - dem - c.comm_seconds - c.wait_seconds,
+    mine = {"dem": dem, "comm": comm_seconds, "wait": wait_seconds,
+            "mpm": step_seconds - dem - comm_seconds - wait_seconds,
             "other": wall_seconds - step_seconds, "rves": n_rve, "dem_steps": dem_steps,
             "reduced_bytes": c.bytes_reduced}
     ranks = c.gather(mine)
@@ -139,7 +141,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
              progress: bool = True, threads: int | None = None,
              comm: Comm | None = None) -> int:
     """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error).
-    Input errors are raised as ConfigError before any rank starts working."""
+    Input errors are raised as ConfigError, on every rank alike (the checks after the
+    ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
     case_path = Path(case_path)
     out = Path(out)
@@ -152,6 +155,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     check_geometry(case, case_path.parent)  # every input check before long computations
     try:
         return _run(case, case_path, out, comm, max_steps, every, resume, progress)
+    except ConfigError:
+        raise  # raised by every rank (see above): printed once by rank 0
     except BaseException:
         if comm.size > 1:  # the other ranks would wait for this one forever
             print(f"grainscale: rank {comm.rank} failed:", file=sys.stderr)
@@ -184,6 +189,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
         c = checkpoints.restore(out, s)
         # output slots (a step can span several intervals) and what was actually written
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
+        last_row_step = int(c.get("last_row_step", -1))
         if root:
             history = History(out / "history.csv", columns, case.title,
                               resume_rows=int(c["rows_written"]))
@@ -192,6 +198,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
                                        keep=int(c["rigid_frames_written"]))
     else:
         n_rows = n_frames = 0
+        last_row_step = -1
         if root:
             history = History(out / "history.csv", columns, case.title)
             pvd = PVDSeries(out / "frames.pvd")
@@ -218,21 +225,22 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
     def counters() -> dict[str, int]:
         written = {"rows_written": history.rows, "frames_written": len(pvd.entries),
                    "rigid_frames_written": len(rigid_pvd.entries)} if root else {}
-        return {"rows": n_rows, "frames": n_frames, **written}
+        return {"rows": n_rows, "frames": n_frames, "last_row_step": last_row_step,
+                **written}
 
     def due(n_done: int, interval: float) -> bool:
         return s.time >= t0 + n_done * interval - 1e-9 * interval
 
     fixed_dt = case.solver.dt
     steps_run = 0
-    last_row_step = -1
+    saved_step = s.step if resume else -1
     code = 0
     bar = tqdm(total=t_end - t0, initial=s.time - t0, disable=not progress, file=sys.stderr,
                unit="s", dynamic_ncols=True,
                bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} s [{elapsed}<{remaining}"
                           "{postfix}]")
-    comm.wait_seconds = comm.comm_seconds = 0.0  # the loop's own (not start-up's)
     comm.bytes_reduced = 0
+    step_comm = step_wait = 0.0  # inside the steps (not outputs', checkpoints')
     tick = wallclock.perf_counter()
     tick_step = s.step
     run_start = tick
@@ -251,10 +259,12 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
                     n_frames += 1
             if every and s.step % every == 0 and s.step > 0 and steps_run > 0:
                 checkpoints.save(out, s, counters())
+                saved_step = s.step
             if s.time >= t_end - 1e-12 * (t_end - t0) or (
                     max_steps is not None and steps_run >= max_steps):
                 break
             t_step = wallclock.perf_counter()
+            c0, w0 = comm.comm_seconds, comm.wait_seconds
             limit = s.stable_dt()
             if fixed_dt is not None:
                 if fixed_dt > limit:
@@ -266,6 +276,8 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
             dt = min(dt, t_end - s.time)
             step(s, dt)
             step_seconds += wallclock.perf_counter() - t_step
+            step_comm += comm.comm_seconds - c0
+            step_wait += comm.wait_seconds - w0
             steps_run += 1
             bar.update(dt)
             now = wallclock.perf_counter()
@@ -273,21 +285,21 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
                 bar.set_postfix_str(f"step {s.step}, {(s.step - tick_step) / (now - tick):.0f} "
                                     "steps/s", refresh=False)
                 tick, tick_step = now, s.step
+        if every and saved_step != s.step:  # before the final row: a resume drops it
+            checkpoints.save(out, s, counters())
     except SimulationError as err:
         if not isinstance(err, RemoteFailure):  # the rank that failed reports the cause
             print(f"grainscale: error: {err}", file=sys.stderr)
         code = 1
     finally:
         bar.close()
-    if code == 0:
-        if every:  # saved before the final row, so a resume drops that row again
-            checkpoints.save(out, s, counters())
-        if last_row_step != s.step:
-            write_row()  # final row (unscheduled)
+    if code == 0 and last_row_step != s.step:
+        write_row()  # final row (unscheduled)
     if root:
         history.close()
     if steps_run:
-        report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start)
+        report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start,
+                             step_comm, step_wait)
         if root:
             (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
             if progress:

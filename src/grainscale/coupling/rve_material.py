@@ -60,6 +60,7 @@ class RVEMaterial:
         self.cp = contact_params(params)
         rng = np.random.default_rng(assignment_seed)
         self.assignment = rng.integers(len(library), size=n_points)
+        self.local = local  # for error messages: the material's point numbers
         if local is not None:
             self.assignment = self.assignment[local]
             n_points = len(local)
@@ -97,8 +98,9 @@ class RVEMaterial:
         try:
             engine.advance(self.batch, nsteps, dt_dem, self.cp, ctrl)
         except engine.RVEError as err:
+            point = err.rve if self.local is None else int(self.local[err.rve])
             raise SimulationError(
-                f"material {self.name!r}, its point {err.rve}: {err} (the run stops; "
+                f"material {self.name!r}, its point {point}: {err} (the run stops; "
                 "history and checkpoints so far are intact)") from None
         lattice.reduce_cells(self.batch)
         stress[:] = self.batch.stress
@@ -114,16 +116,17 @@ class RVEMaterial:
         return self.batch.stress.copy()
 
     def wave_speed(self) -> float:
-        """P-wave speed from the affine stiffness of the contact network [m/s].
+        """Largest P-wave speed of the RVEs, sqrt(max_k C_kk / rho) of each [m/s].
 
-        max_k C_kk of each RVE (an upper bound of its constrained modulus) over the bulk
-        density: a conservative (fast) estimate, so the CFL step is safe.
+        max_k C_kk of an RVE (its affine stiffness, an upper bound of its constrained
+        modulus) over its own bulk density: conservative, so the CFL step is safe, and a
+        maximum over RVEs, so it does not depend on how RVEs are split over ranks.
         """
         if self.batch is None:
             return 0.0
-        c = np.diagonal(self.batch.stiffness, axis1=1, axis2=2).max()
+        c = np.diagonal(self.batch.stiffness, axis1=1, axis2=2).max(axis=1)
         rho = self.batch.mass.sum(axis=1) / self.batch.volume()
-        return float(np.sqrt(c / rho.min()))
+        return float(np.sqrt(c / rho).max())
 
     def state(self) -> dict[str, np.ndarray]:
         out = {f"rve_{k}": v for k, v in self._arrays().items()}

@@ -112,9 +112,21 @@ def launched_by_mpi() -> bool:
 
 
 def world() -> Comm:
-    """The job's communicator: MPI_COMM_WORLD under mpiexec/srun, serial otherwise."""
-    if not launched_by_mpi():
-        return Comm(None)
-    from mpi4py import MPI
+    """The job's communicator: MPI_COMM_WORLD under mpiexec/srun, serial otherwise.
 
-    return Comm(MPI.COMM_WORLD)
+    Refuses to run when Slurm started several tasks that MPI does not see as one job
+    (`srun --mpi=none`, or an mpi4py built for another MPI): each would run the whole
+    case into the same output folder."""
+    comm = Comm(None)
+    if launched_by_mpi():
+        from mpi4py import MPI
+
+        comm = Comm(MPI.COMM_WORLD)
+    tasks = int(os.environ.get("SLURM_STEP_NUM_TASKS", "1") or 1)
+    if tasks > 1 and comm.size != tasks:
+        from grainscale.config.base import ConfigError
+
+        raise ConfigError(f"srun started {tasks} tasks but MPI sees {comm.size} rank(s): "
+                          "launch with srun --mpi=pmi2 (or pmix), and check that mpi4py "
+                          "uses the cluster's MPI (docs/parallel.md)")
+    return comm

@@ -98,8 +98,10 @@ def shape_functions(s: MPMState) -> None:
 def p2g(s: MPMState) -> None:
     """Nodal mass and momentum, seed Eq. 16."""
     pts = s.points
-    s.mass, s.momentum = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w, s.grid.nodes,
-                                                  s.ns)
+    s.mass, s.momentum, ok = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w,
+                                                      s.grid.nodes, s.ns)
+    if not ok:
+        raise SimulationError(f"step {s.step}: non-finite point velocity")
     s.active = s.mass > s.mass_tol
 
 
@@ -189,8 +191,11 @@ def g2p(s: MPMState, dt: float) -> None:
     g = s.grid
     g2p_kernel(s.v_old, s.v_new, s.base, s.w, g.nodes, s.ns, dt, s.flip, g.origin, g.upper,
                pts.x, pts.v, s.chunk_vmax, s.chunk_out)
-    vmax = float(s.chunk_vmax.max()) if pts.n else 0.0
-    g = s.comm.max([vmax if np.isfinite(vmax) else np.inf, float(s.chunk_out.sum())])
+    # finiteness checked here, outside the fastmath kernel (its max drops a NaN); no NaN
+    # enters a reduction, where MPI's MAX would give ranks different answers
+    finite = bool(np.isfinite(pts.v).all() and np.isfinite(pts.x).all())
+    vmax = float(s.chunk_vmax.max()) if pts.n and finite else 0.0
+    g = s.comm.max([vmax if finite else np.inf, float(s.chunk_out.sum())])
     s.vmax = float(g[0])
     n_out = int(s.chunk_out.sum())  # reported by the ranks that own them
     if g[1] > 0 and not n_out:
@@ -205,7 +210,7 @@ def g2p(s: MPMState, dt: float) -> None:
 def remap_velocity(s: MPMState) -> None:
     """MUSL: grid velocity re-mapped from the updated point momenta (same S_Ip)."""
     pts = s.points
-    _, mom = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w, s.grid.nodes, s.ns)
+    _, mom, _ = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w, s.grid.nodes, s.ns)
     v = np.zeros_like(mom)
     a = s.active
     v[a] = mom[a] / s.mass[a, None]
@@ -244,5 +249,6 @@ def step(s: MPMState, dt: float) -> None:
 
 
 def kinetic_energy(pts: Points) -> float:
-    """sum_p m_p |v_p|^2 / 2, J."""
-    return float(0.5 * np.dot(pts.m, np.einsum("ij,ij->i", pts.v, pts.v)))
+    """sum_p m_p |v_p|^2 / 2, J. numpy's pairwise sum, not a BLAS dot product, whose
+    result depends on the BLAS thread count."""
+    return float(0.5 * np.sum(pts.m * np.einsum("ij,ij->i", pts.v, pts.v)))

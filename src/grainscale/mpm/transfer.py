@@ -3,11 +3,12 @@
 Determinism. Every nodal sum (mass, momentum, force) is accumulated exactly in 64-bit
 fixed point: each point's contribution c is rounded once to `round(c * scale)` and the
 integers are added. Integer addition is associative, so the nodal sums do not depend on
-the order in which points are visited, on the number of threads, or (later) on how points
-are split over MPI ranks before an integer all-reduce. `scale` is a power of two chosen
-from an order-independent global bound, `n_points * max_p |c_p|`, so no sum can overflow
-2^62; the resolution is then that bound times 2^-62 (about 1e-13 of the largest
-single contribution for a million points).
+the order in which points are visited, on the number of threads, or on how points are
+split over MPI ranks before the integer all-reduce. `scale` is a power of two chosen
+from an order-independent global bound, `n * max |c|` over all ranks (n: the points,
+plus the traction loads for forces, each adding at most one term per node), so no sum
+can overflow 2^62; the resolution is then that bound times 2^-62 (about 1e-13 of the
+largest single contribution for a million points).
 
 Threads (parallel.py): each thread scatters into its own integer buffer (race free), the
 buffers are summed node by node. Points are visited in fixed chunks of `CHUNK`, so the
@@ -33,7 +34,7 @@ def fixed_point_scale(bound: float) -> float:
             raise FloatingPointError("non-finite value in a particle-to-grid transfer")
         return 1.0
     _, e = math.frexp(bound)  # bound < 2^e
-    return math.ldexp(1.0, HEADROOM - e)
+    return math.ldexp(1.0, min(HEADROOM - e, 1000))  # capped: 2^1000 is still finite
 
 
 @njit(cache=True, fastmath=True, inline="always")
@@ -361,10 +362,15 @@ class Transfer:
         view[...] = block
 
     def mass_momentum(self, m, v, base, w, nodes, ns):
-        """Nodal mass (n_nodes,) and momentum (n_nodes,3) from the points (seed Eq. 16)."""
+        """Nodal mass (n_nodes,) and momentum (n_nodes,3) from the points (seed Eq. 16),
+        and ok: False on every rank if any rank holds a non-finite velocity."""
         P = m.shape[0]
-        local = [float(m.max()) if P else 0.0, float(np.abs(v).max()) if P else 0.0]
+        bad = not np.isfinite(v).all()  # outside the fastmath kernels, and no NaN reduced
+        local = [float(m.max()) if P else 0.0,
+                 float(np.abs(v).max()) if P and not bad else 0.0, 1.0 if bad else 0.0]
         g = self.comm.max([*local, *stencil_box(base, ns)])
+        if g[2] > 0.0:
+            return None, None, False
         mscale = fixed_point_scale(self.n_global * g[0])
         pscale = fixed_point_scale(self.n_global * g[0] * g[1])
         if P:
@@ -372,10 +378,10 @@ class Transfer:
             np.sum(self.buf4, axis=0, out=self.sum4)  # exact: integers
         else:
             self.sum4[:] = 0
-        self._reduce(self.sum4, nodes, g[2:])
+        self._reduce(self.sum4, nodes, g[3:])
         mass = self.sum4[:, 0] * (1.0 / mscale)
         mom = self.sum4[:, 1:4] * (1.0 / pscale)
-        return mass, mom
+        return mass, mom, True
 
     def force(self, m, vol, stress, fext, gravity, h, base, w, dw, nodes, ns,
               extra=None, n_extra: int = 0):
@@ -387,19 +393,21 @@ class Transfer:
         stress or load (the force is then not computed).
         """
         P = m.shape[0]
-        if P:
+        # checked outside the fastmath kernels, which may assume finite values
+        bad = not (np.isfinite(stress).all() and np.isfinite(fext).all())
+        if P and not bad:
             force_bound_kernel(m, vol, stress, fext, gravity, h, self.chunk_max)
-        local = float(self.chunk_max.max()) if P else 0.0
+        local = float(self.chunk_max.max()) if P and not bad else 0.0
         box = stencil_box(base, ns)
         if extra is not None and len(extra[0]):
             ids, f = extra
-            local = max(local, float(np.abs(f).max()))
+            bad = bad or not np.isfinite(f).all()
+            local = max(local, float(np.abs(f).max()) if not bad else 0.0)
             k = ids // int(nodes[0] * nodes[1])
             j = (ids // int(nodes[0])) % int(nodes[1])
             i = ids % int(nodes[0])
             ijk = np.stack([i, j, k], axis=1)
             box = np.maximum(box, np.concatenate([-ijk.min(axis=0), ijk.max(axis=0) + 1]))
-        bad = not np.isfinite(local)
         g = self.comm.max([0.0 if bad else local, 1.0 if bad else 0.0, *box])
         if g[1] > 0.0:
             return None, False
