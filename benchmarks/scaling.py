@@ -162,7 +162,8 @@ def main() -> None:
     ap.add_argument("--configs", nargs="+", default=["1x1", "2x1", "1x2"],
                     help="RANKSxTHREADS; the first one is the reference (1x1)")
     ap.add_argument("--steps", type=int, default=30)
-    ap.add_argument("--repeats", type=int, default=1, help="best of N runs per config")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="rounds over all configs (interleaved); the best of each is kept")
     ap.add_argument("--weak-axis", default="y", help="axis the weak-scaling case grows along")
     ap.add_argument("--no-weak", action="store_true")
     ap.add_argument("--work", type=Path, default=Path("scaling-work"))
@@ -179,10 +180,15 @@ def main() -> None:
         path.write_text(tomli_w.dumps(c))
         return path
 
-    def best(path: Path, ranks: int, threads: int) -> dict:
+    def best_of_rounds(paths: list[Path]) -> list[dict]:
+        """Each config once per round, rounds interleaved (a drifting machine then
+        biases no config); the fastest step time of each config over the rounds."""
         out = args.work / "out"  # shared: packings are generated once and cached there
-        runs = [run(path, out, ranks, threads, args.steps) for _ in range(args.repeats)]
-        return min(runs, key=step_seconds)
+        runs = [[] for _ in configs]
+        for _ in range(args.repeats):
+            for i, (ranks, threads) in enumerate(configs):
+                runs[i].append(run(paths[i], out, ranks, threads, args.steps))
+        return [min(r, key=step_seconds) for r in runs]
 
     profile = replicated_share(case_file(1), args.work / "out", args.steps)
     print(f"profile (1 rank x 1 thread): {profile['step_seconds'] * 1e3:.2f} ms per step, "
@@ -191,10 +197,7 @@ def main() -> None:
     s = profile["s_profile"]
     result = {"case": str(args.case), "steps": args.steps, "profile": profile}
 
-    strong = []
-    for ranks, threads in configs:
-        r = best(case_file(1), ranks, threads)
-        strong.append(r)
+    strong = best_of_rounds([case_file(1)] * len(configs))
     t1 = step_seconds(strong[0])
     for r in strong:
         n = r["ranks"] * r["threads"]
@@ -212,10 +215,7 @@ def main() -> None:
     result["strong"] = strong
 
     if not args.no_weak:
-        weak = []
-        for ranks, threads in configs:
-            n = ranks * threads
-            weak.append(best(case_file(n), ranks, threads))
+        weak = best_of_rounds([case_file(r * t) for r, t in configs])
         t1 = step_seconds(weak[0])
         for r in weak:
             n = r["ranks"] * r["threads"]
