@@ -39,6 +39,7 @@ class SolverCfg(StrictModel):
     gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
     threads: Annotated[int, Field(ge=0)] = 0  # per rank; 0: the cores / ranks per node
     partition_seed: Annotated[int, Field(ge=0)] = 0  # random point-to-rank assignment (MPI)
+    rebalance_every: Annotated[int, Field(ge=0)] = 0  # steps between cost rebalancing; 0: never
 
 
 class TimeCfg(StrictModel):

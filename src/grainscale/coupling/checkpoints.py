@@ -37,6 +37,15 @@ def _material_ids(s: MPMState, i: int) -> np.ndarray:
     return s.point_ids if ids is None else s.point_ids[ids]
 
 
+def rank_state(s: MPMState) -> dict[str, dict[str, np.ndarray]]:
+    """This rank's points and materials' state, every row tagged with its global point
+    id (a checkpoint part, or what rebalancing moves between ranks)."""
+    groups = {"points": {**s.points.arrays(), "global_id": s.point_ids}}
+    for i, m in enumerate(s.materials):
+        groups[f"material_{i}"] = {**m.state(), "global_id": _material_ids(s, i)}
+    return groups
+
+
 def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
     """Write this rank's part, then (rank 0) the manifest; collective."""
     # the rank count is in the name: a resume on other ranks that saves at the same step
@@ -45,10 +54,8 @@ def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
     error = None
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        groups = {"points": {**s.points.arrays(), "global_id": s.point_ids}}
-        for i, m in enumerate(s.materials):
-            groups[f"material_{i}"] = {**m.state(), "global_id": _material_ids(s, i)}
-        write_checkpoint(folder / f"rank_{s.comm.rank:05d}.h5", groups, {"step": s.step})
+        write_checkpoint(folder / f"rank_{s.comm.rank:05d}.h5", rank_state(s),
+                         {"step": s.step})
     except OSError as err:
         error = err
     if s.comm.any(error is not None):  # keep the previous checkpoint
@@ -70,13 +77,43 @@ def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
     s.comm.barrier()  # no rank runs ahead into a new part while rank 0 cleans up
 
 
-def _rows(f: h5py.File, group: str, wanted: np.ndarray) -> tuple[np.ndarray, dict]:
-    """The rows of `group` whose global ids are in `wanted` (sorted): ids, arrays."""
-    gid = f[group]["global_id"][()]
+def _rows(group, wanted: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The rows of a group (an HDF5 group or a dict of arrays) whose global ids are in
+    `wanted` (sorted): their ids and arrays. Only those rows are read from a file."""
+    gid = np.asarray(group["global_id"][()])
     rows = np.flatnonzero(np.isin(gid, wanted))
-    arrays = {k: f[group][k][rows] if len(rows) else f[group][k][:0]
-              for k in f[group] if k != "global_id"}
+    arrays = {k: group[k][rows] if len(rows) else group[k][:0]
+              for k in group if k != "global_id"}
     return gid[rows], arrays
+
+
+def load_rows(s: MPMState, sources) -> bool:
+    """Fill s with the rows it owns from `sources` (mappings group -> arrays: open part
+    files or rank_state() dicts). Returns whether every point of s was found."""
+    ids, point_parts = [], []
+    mat_ids = [[] for _ in s.materials]
+    mat_parts = [[] for _ in s.materials]
+    for src in sources:
+        g, a = _rows(src["points"], s.point_ids)
+        ids.append(g)
+        point_parts.append(a)
+        for i in range(len(s.materials)):
+            g, a = _rows(src[f"material_{i}"], _material_ids(s, i))
+            mat_ids[i].append(g)
+            mat_parts[i].append(a)
+    found = np.concatenate(ids)
+    if found.size != s.points.n:
+        return False
+    order = np.argsort(found)
+    for k in point_parts[0]:
+        getattr(s.points, k)[...] = np.concatenate([p[k] for p in point_parts])[order]
+    for i, m in enumerate(s.materials):
+        merge = getattr(m, "merge_states", None)
+        state = merge(mat_parts[i]) if merge else {
+            k: np.concatenate([p[k] for p in mat_parts[i]]) for k in mat_parts[i][0]}
+        order = np.argsort(np.concatenate(mat_ids[i]))
+        m.load_state({k: v[order] for k, v in state.items()})
+    return True
 
 
 def restore(out: Path, s: MPMState) -> dict:
@@ -89,34 +126,19 @@ def restore(out: Path, s: MPMState) -> dict:
     missing = [f for f in files if not f.is_file()]
     if missing:
         raise ConfigError(f"{out / MANIFEST}: checkpoint part {missing[0]} is missing")
-    ids, point_parts = [], []
-    mat_ids = [[] for _ in s.materials]
-    mat_parts = [[] for _ in s.materials]
-    for path in files:
-        with h5py.File(path, "r") as f:
+    handles = [h5py.File(path, "r") for path in files]
+    try:
+        for path, f in zip(files, handles, strict=True):
             if f.attrs["step"] != attrs["step"]:
                 raise ConfigError(f"{path}: from step {f.attrs['step']}, the manifest is "
                                   f"at step {attrs['step']}")
-            g, a = _rows(f, "points", s.point_ids)
-            ids.append(g)
-            point_parts.append(a)
-            for i in range(len(s.materials)):
-                g, a = _rows(f, f"material_{i}", _material_ids(s, i))
-                mat_ids[i].append(g)
-                mat_parts[i].append(a)
-    found = np.concatenate(ids)
-    if s.comm.any(found.size != s.points.n):
+        complete = load_rows(s, handles)
+    finally:
+        for f in handles:
+            f.close()
+    if s.comm.any(not complete):
         raise ConfigError(f"{out / MANIFEST}: the checkpoint does not hold the points this "
                           "case builds; was the case file changed?")
-    order = np.argsort(found)
-    for k in point_parts[0]:
-        getattr(s.points, k)[...] = np.concatenate([p[k] for p in point_parts])[order]
-    for i, m in enumerate(s.materials):
-        merge = getattr(m, "merge_states", None)
-        state = merge(mat_parts[i]) if merge else {
-            k: np.concatenate([p[k] for p in mat_parts[i]]) for k in mat_parts[i][0]}
-        order = np.argsort(np.concatenate(mat_ids[i]))
-        m.load_state({k: v[order] for k, v in state.items()})
     if s.rigid is not None:
         s.rigid.x[...] = groups["rigid"]["x"]
         s.rigid.displacement[...] = groups["rigid"]["displacement"]

@@ -33,6 +33,7 @@ from grainscale.config.case import Case, load_case
 from grainscale.coupling import checkpoints
 from grainscale.coupling import materials as dem_materials
 from grainscale.coupling.outputs import gather, history_values, point_fields
+from grainscale.coupling.rebalance import rebalance
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.distributed.comm import Comm, world
 from grainscale.io.history import History
@@ -232,6 +233,8 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
         return s.time >= t0 + n_done * interval - 1e-9 * interval
 
     fixed_dt = case.solver.dt
+    balance_every = case.solver.rebalance_every if comm.size > 1 else 0
+    balance = {"rebalances": 0}
     steps_run = 0
     saved_step = s.step if resume else -1
     code = 0
@@ -279,6 +282,11 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
             step_comm += comm.comm_seconds - c0
             step_wait += comm.wait_seconds - w0
             steps_run += 1
+            if balance_every and s.step % balance_every == 0:
+                s, moved = rebalance(s, case, case_path.parent, factory, balance_every)
+                balance = {"rebalances": balance["rebalances"] + 1,
+                           "imbalance_before_last": moved["before"],
+                           "imbalance_after_last": moved["after"]}
             bar.update(dt)
             now = wallclock.perf_counter()
             if now - tick > 1.0:
@@ -300,6 +308,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
     if steps_run:
         report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start,
                              step_comm, step_wait)
+        report.update(balance if balance_every else {})
         if root:
             (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
             if progress:

@@ -74,6 +74,9 @@ class RVEMaterial:
         self.substeps = 0  # DEM steps of the last update (largest over RVEs)
         self.seconds = 0.0  # wall time spent in DEM updates
         self.rve_steps = 0  # sum over RVEs of DEM steps taken
+        # per RVE, particle-steps plus contact-steps since the last rebalancing: the
+        # measured work that decides the load balance over ranks
+        self.work = np.zeros(n_points)
         if self.batch is not None:
             engine.refresh(self.batch, self.cp)
             self.theta_prev = homogenise.mean_rotation(self.batch)
@@ -109,6 +112,7 @@ class RVEMaterial:
         self.theta_prev = theta
         self.substeps = int(nsteps.max())
         self.rve_steps += int(nsteps.sum())
+        self.work += nsteps * (self.batch.n_particles + self.batch.ncontact)
         self.seconds += time.perf_counter() - t0
 
     def initial_stress(self) -> np.ndarray:
@@ -131,7 +135,9 @@ class RVEMaterial:
     def state(self) -> dict[str, np.ndarray]:
         out = {f"rve_{k}": v for k, v in self._arrays().items()}
         out["theta_prev"] = self.theta_prev
+        out["spin_rate"] = self.spin_rate
         out["assignment"] = self.assignment
+        out["work"] = self.work
         return out
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -139,6 +145,9 @@ class RVEMaterial:
         self.batch = batch if batch.n_rve else None
         self.theta_prev = np.asarray(state["theta_prev"], float).copy()
         self.assignment = np.asarray(state["assignment"]).copy()
+        n = len(self.theta_prev)
+        self.spin_rate = np.asarray(state.get("spin_rate", np.zeros(n)), float).copy()
+        self.work = np.asarray(state.get("work", np.zeros(n)), float).copy()
         # no refresh here: re-evaluating contacts would re-project the tangential history
         # at the saved positions, and a resumed run must continue bitwise
 
@@ -163,8 +172,9 @@ class RVEMaterial:
                    for p in parts]
         batches = [b for b in batches if b.n_rve] or batches[:1]
         out = {f"rve_{k}": v for k, v in state_arrays(concatenate(batches)).items()}
-        for key in ("theta_prev", "assignment"):
-            out[key] = np.concatenate([p[key] for p in parts])
+        for key in ("theta_prev", "spin_rate", "assignment", "work"):
+            if all(key in p for p in parts):
+                out[key] = np.concatenate([p[key] for p in parts])
         return out
 
     def _arrays(self) -> dict[str, np.ndarray]:

@@ -91,7 +91,9 @@ class Comm:
     def abort(self, code: int = 1) -> None:
         """End every rank of the job now (a failure that the others cannot see)."""
         if self.mpi is not None:
+            sys.stdout.flush()
             sys.stderr.flush()
+            time.sleep(0.5)  # let the process manager forward the error before the kill
             self.mpi.Abort(code)
 
     def node_ranks(self) -> int:

@@ -80,15 +80,17 @@ def build_grid(case: Case) -> Grid:
 
 
 def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
-                material_factory=None, comm: Comm | None = None) -> MPMState:
+                material_factory=None, comm: Comm | None = None,
+                owners: np.ndarray | None = None) -> MPMState:
     """The solver state at time.start.
 
     `material_factory(name, cfg, n_points, local)` may supply materials of types this
     module does not know (the coupling's DEM material): n_points is the material's
     number of points over all ranks, local the indices (into those) this rank owns.
     Under MPI (`comm` with several ranks) every rank builds and checks the whole point
-    set, then keeps the points it owns (distributed/partition.py); `state.point_ids`
-    holds their global ids, in ascending order.
+    set, then keeps the points it owns (distributed/partition.py, or `owners`: the rank
+    of every point, as rebalancing decides); `state.point_ids` holds their global ids,
+    in ascending order.
     """
     case_dir = Path(case_dir)
     comm = comm if comm is not None else Comm()
@@ -112,7 +114,9 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         sets.append(make_points(x, vol, mcfg.density, names.index(body.material),
                                 velocity=body.velocity, lp=lp))
     everything = concatenate(sets)
-    point_ids = partition.owned(everything.n, comm.size, comm.rank, case.solver.partition_seed)
+    if owners is None:
+        owners = partition.owners(everything.n, comm.size, case.solver.partition_seed)
+    point_ids = np.flatnonzero(owners == comm.rank).astype(np.int64)
     pts = take(everything, point_ids)
     materials, mat_points = [], []
     for k, name in enumerate(names):
