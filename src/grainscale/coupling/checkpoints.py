@@ -77,7 +77,7 @@ def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
     s.comm.barrier()  # no rank runs ahead into a new part while rank 0 cleans up
 
 
-def _rows(group, wanted: np.ndarray) -> tuple[np.ndarray, dict]:
+def rows_of(group, wanted: np.ndarray) -> tuple[np.ndarray, dict]:
     """The rows of a group (an HDF5 group or a dict of arrays) whose global ids are in
     `wanted` (sorted): their ids and arrays. Only those rows are read from a file."""
     gid = np.asarray(group["global_id"][()])
@@ -94,11 +94,11 @@ def load_rows(s: MPMState, sources) -> bool:
     mat_ids = [[] for _ in s.materials]
     mat_parts = [[] for _ in s.materials]
     for src in sources:
-        g, a = _rows(src["points"], s.point_ids)
+        g, a = rows_of(src["points"], s.point_ids)
         ids.append(g)
         point_parts.append(a)
         for i in range(len(s.materials)):
-            g, a = _rows(src[f"material_{i}"], _material_ids(s, i))
+            g, a = rows_of(src[f"material_{i}"], _material_ids(s, i))
             mat_ids[i].append(g)
             mat_parts[i].append(a)
     found = np.concatenate(ids)

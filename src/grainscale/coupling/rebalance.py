@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grainscale.coupling.checkpoints import load_rows, rank_state
+from grainscale.coupling.checkpoints import load_rows, rank_state, rows_of
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.mpm.setup import build_state
 from grainscale.mpm.step import MPMState
@@ -68,7 +68,7 @@ def rebalance(s: MPMState, case, case_dir, factory, steps: int) -> tuple[MPMStat
     outgoing = []
     for r in range(comm.size):  # the rows each rank will own, from this rank
         keep = np.flatnonzero(owners == r)
-        outgoing.append({g: _select(arrays, keep) for g, arrays in mine.items()})
+        outgoing.append({g: _select(group, keep) for g, group in mine.items()})
     incoming = comm.mpi.alltoall(outgoing)
     new = build_state(case, case_dir, n_threads=s.n_threads, material_factory=factory,
                       comm=comm, owners=owners)
@@ -85,6 +85,7 @@ def rebalance(s: MPMState, case, case_dir, factory, steps: int) -> tuple[MPMStat
     raise RuntimeError("rebalancing lost points")  # a bug: aborts the job
 
 
-def _select(arrays: dict[str, np.ndarray], wanted: np.ndarray) -> dict[str, np.ndarray]:
-    rows = np.flatnonzero(np.isin(arrays["global_id"], wanted))
-    return {k: v[rows] for k, v in arrays.items()}
+def _select(group: dict[str, np.ndarray], wanted: np.ndarray) -> dict[str, np.ndarray]:
+    """The rows of a rank_state() group whose global ids are in `wanted`, still tagged."""
+    ids, arrays = rows_of(group, wanted)
+    return {**arrays, "global_id": ids}

@@ -178,5 +178,4 @@ class RVEMaterial:
         return out
 
     def _arrays(self) -> dict[str, np.ndarray]:
-        b = self.batch if self.batch is not None else self._none
-        return {name: getattr(b, name) for name in STATE_FIELDS}
+        return state_arrays(self.batch if self.batch is not None else self._none)

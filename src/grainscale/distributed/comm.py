@@ -36,36 +36,29 @@ class Comm:
     def root(self) -> bool:
         return self.rank == 0
 
-    def _sync(self) -> None:
+    def _allreduce(self, a: np.ndarray, op: str) -> None:
+        """In place over ranks, after a barrier that takes the waiting out of the timing."""
+        from mpi4py import MPI
+
         t = time.perf_counter()
         self.mpi.Barrier()
-        self.wait_seconds += time.perf_counter() - t
+        t1 = time.perf_counter()
+        self.mpi.Allreduce(MPI.IN_PLACE, a, op=getattr(MPI, op))
+        self.wait_seconds += t1 - t
+        self.comm_seconds += time.perf_counter() - t1
+        self.bytes_reduced += a.nbytes
 
     def max(self, values) -> np.ndarray:
         """Element-wise maximum over ranks of a float64 vector (exact)."""
         a = np.array(values, dtype=np.float64)
-        if self.mpi is None:
-            return a
-        from mpi4py import MPI
-
-        self._sync()
-        t = time.perf_counter()
-        self.mpi.Allreduce(MPI.IN_PLACE, a, op=MPI.MAX)
-        self.comm_seconds += time.perf_counter() - t
-        self.bytes_reduced += a.nbytes
+        if self.mpi is not None:
+            self._allreduce(a, "MAX")
         return a
 
     def sum_int(self, a: np.ndarray) -> None:
         """In-place sum over ranks of a contiguous int64 array (exact)."""
-        if self.mpi is None:
-            return
-        from mpi4py import MPI
-
-        self._sync()
-        t = time.perf_counter()
-        self.mpi.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
-        self.comm_seconds += time.perf_counter() - t
-        self.bytes_reduced += a.nbytes
+        if self.mpi is not None:
+            self._allreduce(a, "SUM")
 
     def total(self, n: int) -> int:
         """Sum of an integer over ranks."""

@@ -22,7 +22,3 @@ def owners(n_points: int, n_ranks: int, seed: int = 0) -> np.ndarray:
         rank[order[bounds[r]:bounds[r + 1]]] = r
     return rank
 
-
-def owned(n_points: int, n_ranks: int, rank: int, seed: int = 0) -> np.ndarray:
-    """Global ids (ascending) of the points that `rank` owns."""
-    return np.flatnonzero(owners(n_points, n_ranks, seed) == rank).astype(np.int64)

@@ -121,14 +121,14 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
     materials, mat_points = [], []
     for k, name in enumerate(names):
         ids = np.flatnonzero(pts.mat == k).astype(np.int64)
-        # this rank's points as indices into the material's global point list
-        local = np.searchsorted(np.flatnonzero(everything.mat == k), point_ids[ids])
+        everyone = np.flatnonzero(everything.mat == k)  # the material's global point list
+        local = np.searchsorted(everyone, point_ids[ids])  # this rank's points in it
         cfg = case.materials[name]
         if cfg.type in KINDS:
             params = cfg.model_dump(exclude={"type"})
             mat = KINDS[cfg.type](name, ids.size, **params)
         elif material_factory is not None:
-            mat = material_factory(name, cfg, int(np.sum(everything.mat == k)), local)
+            mat = material_factory(name, cfg, everyone.size, local)
         else:
             raise ConfigError(f"materials.{name}.type = {cfg.type!r}: unknown material type; "
                               f"valid: {sorted(KINDS)}")

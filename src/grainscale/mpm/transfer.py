@@ -403,11 +403,8 @@ class Transfer:
             ids, f = extra
             bad = bad or not np.isfinite(f).all()
             local = max(local, float(np.abs(f).max()) if not bad else 0.0)
-            k = ids // int(nodes[0] * nodes[1])
-            j = (ids // int(nodes[0])) % int(nodes[1])
-            i = ids % int(nodes[0])
-            ijk = np.stack([i, j, k], axis=1)
-            box = np.maximum(box, np.concatenate([-ijk.min(axis=0), ijk.max(axis=0) + 1]))
+            kji = np.unravel_index(ids, (int(nodes[2]), int(nodes[1]), int(nodes[0])))
+            box = np.maximum(box, stencil_box(np.stack(kji[::-1], axis=1), 1))
         g = self.comm.max([0.0 if bad else local, 1.0 if bad else 0.0, *box])
         if g[1] > 0.0:
             return None, False
