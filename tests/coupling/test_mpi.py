@@ -16,10 +16,14 @@ import time
 import tomllib
 from pathlib import Path
 
+import meshio
+import numpy as np
 import pytest
 import tomli_w
 
 from grainscale.cli import main
+from grainscale.dem.retile import thin_axis
+from grainscale.io.rve_h5 import read_rve_state
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_multiscale_run import small_unit_element  # noqa: E402
@@ -87,10 +91,15 @@ def rve_case(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def serial(rve_case, tmp_path_factory):
+def serial_out(rve_case, tmp_path_factory):
     out = tmp_path_factory.mktemp("serial")
     assert main(["run", str(rve_case), "--out", str(out), "--quiet", "--threads", "1"]) == 0
-    return (out / "history.csv").read_text()
+    return out
+
+
+@pytest.fixture(scope="module")
+def serial(serial_out):
+    return (serial_out / "history.csv").read_text()
 
 
 def test_ranks_give_identical_multiscale_history(rve_case, serial, tmp_path):
@@ -171,6 +180,8 @@ def update(self, dH, dt, stress):
 
 rve_material.RVEMaterial.update = update
 from grainscale.cli import main
+from grainscale.dem.retile import thin_axis
+from grainscale.io.rve_h5 import read_rve_state
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -221,3 +232,34 @@ def test_srun_tasks_that_mpi_does_not_join_are_refused(tmp_path, monkeypatch, ca
     assert main(["run", str(case), "--out", str(tmp_path / "o"), "--quiet"]) == 2
     assert "srun started 4 tasks but MPI sees 1 rank" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp_path):
+    """Cells doubled during the run (dem/retile.py) on some points only: RVEs of two
+    sizes, split over ranks, checkpointed padded to one size and resumed on another rank
+    count, give the serial history. The threshold lies between the packings' initial
+    narrowest widths, so the points of some packings double at the first step."""
+    widths = []
+    for f in sorted((serial_out / "packings").glob("sand_*.h5")):
+        b, _ = read_rve_state(f)
+        widths.append(thin_axis(b.h[0])[1] / (2 * b.radius[0].mean()))
+    widths = sorted(widths)
+    assert widths[1] < widths[2]
+    case = tomllib.loads(rve_case.read_text())
+    case["materials"]["sand"].update({"retile_width": 0.5 * (widths[1] + widths[2]),
+                                      "retile_max_factor": 2})
+    path = tmp_path / "retiled.toml"
+    path.write_text(tomli_w.dumps(case))
+    ref = tmp_path / "serial"
+    assert main(["run", str(path), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
+    history = (ref / "history.csv").read_text()
+    assert history != (serial_out / "history.csv").read_text()  # the doubling took place
+    out = tmp_path / "part"
+    common = ["run", str(path), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
+    r = mpirun(2, [*common, "--max-steps", "9"])
+    assert r.returncode == 0, r.stderr
+    r = mpirun(3, [*common, "--resume"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history
+    sizes = meshio.read(sorted((out / "frames").glob("frame_*.vtu"))[-1]).point_data
+    assert set(np.unique(sizes["rve_particles"])) == {120.0, 240.0}

@@ -98,6 +98,11 @@ class DEMMaterialCfg(StrictModel):
     time_integration: Literal["dynamic", "quasi_static"] = "dynamic"
     min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
     strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
+    # an RVE cell narrower than this many mean grain diameters across a face pair is
+    # doubled along that direction, grains repeated (dem/retile.py); 0: never
+    retile_width: Annotated[float, Field(ge=0, le=20)] = 4.0
+    # no RVE grows beyond this multiple of its packing's spheres by retiling
+    retile_max_factor: Annotated[int, Field(ge=1, le=64)] = 8
     density: Pos | None = None  # kg/m^3; the packings' bulk density (set by the run)
 
 

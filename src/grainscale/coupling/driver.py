@@ -51,8 +51,7 @@ def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: floa
     (DEM wall time x threads / RVEs / steps). comm_seconds and wait_seconds are those
     spent inside the steps. Collective: the result is on rank 0."""
     dem = sum(m.seconds for m in s.materials if isinstance(m, RVEMaterial))
-    n_rve = sum(m.batch.n_rve for m in s.materials
-                if isinstance(m, RVEMaterial) and m.batch is not None)
+    n_rve = sum(m.n_rve for m in s.materials if isinstance(m, RVEMaterial))
     dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
     c = s.comm
     mine = {"dem": dem, "comm": comm_seconds, "wait": wait_seconds,
@@ -175,7 +174,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
     s = build_state(case, case_path.parent, n_threads=numba.get_num_threads(),
                     material_factory=factory, comm=comm)
     for mat, ids in zip(s.materials, s.mat_points, strict=True):
-        if hasattr(mat, "initial_stress") and getattr(mat, "batch", None) is not None:
+        if hasattr(mat, "initial_stress") and getattr(mat, "n_rve", 0):
             s.points.stress[slice(None) if ids is None else ids] = mat.initial_stress()
     if root:
         (out / "frames").mkdir(exist_ok=True)

@@ -73,7 +73,9 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
         return RVEMaterial(name, case.rve, libraries[name], n_points, local=local,
                            assignment_seed=cfg.assignment_seed, mode=cfg.time_integration,
                            min_substeps=cfg.min_substeps,
-                           strain_per_substep=cfg.strain_per_substep)
+                           strain_per_substep=cfg.strain_per_substep,
+                           retile_width=cfg.retile_width,
+                           retile_max_factor=cfg.retile_max_factor)
 
     return factory
 

@@ -28,7 +28,7 @@ def point_costs(s: MPMState, steps: int) -> np.ndarray:
     """Work of each of this rank's points over the last `steps` steps [particle-steps]."""
     cost = np.full(s.points.n, MPM_POINT_WORK * steps)
     for m, ids in zip(s.materials, s.mat_points, strict=True):
-        if isinstance(m, RVEMaterial) and m.batch is not None:
+        if isinstance(m, RVEMaterial) and m.n_rve:
             cost[slice(None) if ids is None else ids] += m.work
     return cost
 

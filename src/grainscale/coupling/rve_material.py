@@ -24,14 +24,16 @@ import time
 import numpy as np
 
 from grainscale.config.rve import RVEParams
-from grainscale.dem import engine, homogenise, lattice
+from grainscale.dem import engine, homogenise, lattice, retile
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import (
     STATE_FIELDS,
     RVEBatch,
     concatenate,
     from_state_arrays,
+    padded,
     state_arrays,
+    unpadded,
 )
 from grainscale.mpm.step import SimulationError
 
@@ -42,14 +44,23 @@ def bulk_density(library: list[RVEBatch]) -> float:
 
 
 class RVEMaterial:
-    """Batched RVE material with the MPM material interface (mpm/materials/base.py)."""
+    """Batched RVE material with the MPM material interface (mpm/materials/base.py).
+
+    The RVEs are held in groups of equal sphere count (`groups`, with `rows[g]` the
+    point index of each RVE of group g): all start in one group, and an RVE whose cell
+    has become too thin is doubled (dem/retile.py) and moves to the group of twice its
+    spheres. Each group is stepped as one batch.
+    """
 
     def __init__(self, name: str, params: RVEParams, library: list[RVEBatch], n_points: int,
                  assignment_seed: int = 0, mode: str = "dynamic", min_substeps: int = 1,
-                 strain_per_substep: float = 1e-5, local: np.ndarray | None = None):
+                 strain_per_substep: float = 1e-5, local: np.ndarray | None = None,
+                 retile_width: float = 0.0, retile_max_factor: int = 8):
         """n_points: points of this material over all ranks; local: the indices (into
         them) of the points this process holds (default: all). The packing of each point
-        is drawn for all points with the seed, so it does not depend on the ranks."""
+        is drawn for all points with the seed, so it does not depend on the ranks.
+        retile_width: cells narrower than this many mean grain diameters are doubled
+        (0: never), up to retile_max_factor times the packing's spheres."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         self.name = name
@@ -57,6 +68,8 @@ class RVEMaterial:
         self.mode = mode
         self.min_substeps = int(min_substeps)
         self.strain_per_substep = float(strain_per_substep)
+        self.retile_width = float(retile_width)
+        self.max_particles = int(retile_max_factor) * max(b.n_particles for b in library)
         self.cp = contact_params(params)
         rng = np.random.default_rng(assignment_seed)
         self.assignment = rng.integers(len(library), size=n_points)
@@ -64,8 +77,13 @@ class RVEMaterial:
         if local is not None:
             self.assignment = self.assignment[local]
             n_points = len(local)
-        self.batch = concatenate([library[k] for k in self.assignment]) if n_points else None
+        self.n_points = n_points
         self._none = library[0].take(np.zeros(0, np.int64))  # the shape of "no RVE"
+        self.groups: list[RVEBatch] = []
+        self.rows: list[np.ndarray] = []
+        if n_points:
+            self.groups = [concatenate([library[k] for k in self.assignment])]
+            self.rows = [np.arange(n_points)]
         self.density = bulk_density(library)
         self.dt_crit = min(engine.critical_dt(b, self.cp, params.numerics.timestep_safety)
                            for b in library)
@@ -74,50 +92,113 @@ class RVEMaterial:
         self.substeps = 0  # DEM steps of the last update (largest over RVEs)
         self.seconds = 0.0  # wall time spent in DEM updates
         self.rve_steps = 0  # sum over RVEs of DEM steps taken
+        self.retiled = 0  # cells doubled so far on this process
         # per RVE, particle-steps plus contact-steps since the last rebalancing: the
         # measured work that decides the load balance over ranks
         self.work = np.zeros(n_points)
-        if self.batch is not None:
-            engine.refresh(self.batch, self.cp)
-            self.theta_prev = homogenise.mean_rotation(self.batch)
+        for b in self.groups:
+            engine.refresh(b, self.cp)
+        if n_points:
+            self.theta_prev = self._per_point(homogenise.mean_rotation)
+
+    @property
+    def n_rve(self) -> int:
+        return self.n_points
+
+    @property
+    def batch(self) -> RVEBatch | None:
+        """All RVEs as one batch, in point order, while they have one size (scripts)."""
+        if not self.groups:
+            return None
+        if len(self.groups) > 1:
+            raise ValueError(f"material {self.name!r}: RVEs of {len(self.groups)} sizes "
+                             "(cells were retiled); use .groups")
+        return self.groups[0]
+
+    def _per_point(self, f) -> np.ndarray:
+        """f(group) (R_g, ...) of every group, scattered into point order (P, ...)."""
+        parts = [np.asarray(f(b)) for b in self.groups]
+        out = np.empty((self.n_points, *parts[0].shape[1:]), parts[0].dtype)
+        for rows, part in zip(self.rows, parts, strict=True):
+            out[rows] = part
+        return out
 
     # ------------------------------------------------------------------ interface
     def update(self, dH: np.ndarray, dt: float, stress: np.ndarray) -> None:
         """Deform each RVE by its dH over the step dt [s]; stress <- Love-Weber sigma."""
-        if self.batch is None:
+        if not self.groups:
             return
         t0 = time.perf_counter()
-        n_rve = self.batch.n_rve
-        if self.mode == "dynamic":
-            n = max(self.min_substeps, math.ceil(dt / self.dt_crit - 1e-9))
-            nsteps = np.full(n_rve, n, np.int64)
-            dt_dem = dt / n
-        else:
-            size = np.abs(dH).max(axis=(1, 2))
-            nsteps = np.maximum(self.min_substeps,
-                                np.ceil(size / self.strain_per_substep)).astype(np.int64)
-            dt_dem = self.dt_crit
-        ctrl = engine.increment_control(self.batch, dH, nsteps, dt_dem)
-        try:
-            engine.advance(self.batch, nsteps, dt_dem, self.cp, ctrl)
-        except engine.RVEError as err:
-            point = err.rve if self.local is None else int(self.local[err.rve])
-            raise SimulationError(
-                f"material {self.name!r}, its point {point}: {err} (the run stops; "
-                "history and checkpoints so far are intact)") from None
-        lattice.reduce_cells(self.batch)
-        stress[:] = self.batch.stress
-        theta = homogenise.mean_rotation(self.batch)
+        most = 0
+        for batch, rows in zip(self.groups, self.rows, strict=True):
+            if self.mode == "dynamic":
+                n = max(self.min_substeps, math.ceil(dt / self.dt_crit - 1e-9))
+                nsteps = np.full(batch.n_rve, n, np.int64)
+                dt_dem = dt / n
+            else:
+                size = np.abs(dH[rows]).max(axis=(1, 2))
+                nsteps = np.maximum(self.min_substeps,
+                                    np.ceil(size / self.strain_per_substep)).astype(np.int64)
+                dt_dem = self.dt_crit
+            ctrl = engine.increment_control(batch, dH[rows], nsteps, dt_dem)
+            try:
+                engine.advance(batch, nsteps, dt_dem, self.cp, ctrl)
+            except engine.RVEError as err:
+                point = int(rows[err.rve])
+                point = point if self.local is None else int(self.local[point])
+                raise SimulationError(
+                    f"material {self.name!r}, its point {point}: {err} (the run stops; "
+                    "history and checkpoints so far are intact)") from None
+            lattice.reduce_cells(batch)
+            stress[rows] = batch.stress
+            most = max(most, int(nsteps.max()))
+            self.rve_steps += int(nsteps.sum())
+            self.work[rows] += nsteps * (batch.n_particles + batch.ncontact)
+        self._retile()
+        theta = self._per_point(homogenise.mean_rotation)
         self.spin_rate = (theta - self.theta_prev) / dt
         self.theta_prev = theta
-        self.substeps = int(nsteps.max())
-        self.rve_steps += int(nsteps.sum())
-        self.work += nsteps * (self.batch.n_particles + self.batch.ncontact)
+        self.substeps = most
         self.seconds += time.perf_counter() - t0
+
+    def _retile(self) -> None:
+        """Double every cell narrower than retile_width mean diameters (dem/retile.py)."""
+        if self.retile_width <= 0:
+            return
+        moved: dict[int, list[tuple[int, RVEBatch]]] = {}
+        for g, (batch, rows) in enumerate(zip(self.groups, self.rows, strict=True)):
+            if 2 * batch.n_particles > self.max_particles:
+                continue
+            keep = np.ones(batch.n_rve, bool)
+            for r in range(batch.n_rve):
+                k, width = retile.thin_axis(batch.h[r])
+                if width < self.retile_width * 2.0 * batch.radius[r].mean():
+                    moved.setdefault(2 * batch.n_particles, []).append(
+                        (int(rows[r]), retile.double_cell(batch, r, k)))
+                    keep[r] = False
+            if not keep.all():
+                self.groups[g] = batch.take(np.flatnonzero(keep))
+                self.rows[g] = rows[keep]
+        for n, items in moved.items():
+            sizes = [b.n_particles for b in self.groups]
+            new = concatenate([b for _, b in items])
+            ids = np.array([p for p, _ in items])
+            if n in sizes:
+                g = sizes.index(n)
+                new = concatenate([self.groups[g], new])
+                ids = np.concatenate([self.rows[g], ids])
+                self.groups[g], self.rows[g] = new, ids
+            else:
+                self.groups.append(new)
+                self.rows.append(ids)
+            self.retiled += len(items)
+        keep = [g for g, b in enumerate(self.groups) if b.n_rve]
+        self.groups = [self.groups[g] for g in keep]
+        self.rows = [self.rows[g] for g in keep]
 
     def initial_stress(self) -> np.ndarray:
         """(P,3,3) Love-Weber stress of the prepared RVEs [Pa]."""
-        return self.batch.stress.copy()
+        return self._per_point(lambda b: b.stress)
 
     def wave_speed(self) -> float:
         """Largest P-wave speed of the RVEs, sqrt(max_k C_kk / rho) of each [m/s].
@@ -126,14 +207,32 @@ class RVEMaterial:
         modulus) over its own bulk density: conservative, so the CFL step is safe, and a
         maximum over RVEs, so it does not depend on how RVEs are split over ranks.
         """
-        if self.batch is None:
-            return 0.0
-        c = np.diagonal(self.batch.stiffness, axis1=1, axis2=2).max(axis=1)
-        rho = self.batch.mass.sum(axis=1) / self.batch.volume()
-        return float(np.sqrt(c / rho).max())
+        speed = 0.0
+        for b in self.groups:
+            c = np.diagonal(b.stiffness, axis1=1, axis2=2).max(axis=1)
+            rho = b.mass.sum(axis=1) / b.volume()
+            speed = max(speed, float(np.sqrt(c / rho).max()))
+        return speed
 
     def state(self) -> dict[str, np.ndarray]:
-        out = {f"rve_{k}": v for k, v in self._arrays().items()}
+        """Per point: the RVE's full state, padded to the largest sphere count and list
+        capacity here (`rve_particles` holds each RVE's own count), and the material's
+        per-point arrays."""
+        if self.groups:
+            n = max(b.n_particles for b in self.groups)
+            k = max(b.capacity for b in self.groups)
+            arrays = {}
+            for b, rows in zip(self.groups, self.rows, strict=True):
+                for name, v in padded(state_arrays(b), n, k).items():
+                    if name not in arrays:
+                        arrays[name] = np.empty((self.n_points, *v.shape[1:]), v.dtype)
+                    arrays[name][rows] = v
+            counts = self._per_point(lambda b: np.full(b.n_rve, b.n_particles))
+        else:
+            arrays = state_arrays(self._none)
+            counts = np.zeros(0, np.int64)
+        out = {f"rve_{k}": v for k, v in arrays.items()}
+        out["rve_particles"] = counts
         out["theta_prev"] = self.theta_prev
         out["spin_rate"] = self.spin_rate
         out["assignment"] = self.assignment
@@ -141,8 +240,16 @@ class RVEMaterial:
         return out
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
-        batch = from_state_arrays({k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS})
-        self.batch = batch if batch.n_rve else None
+        arrays = {k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS}
+        counts = np.asarray(state.get("rve_particles",
+                                      np.full(len(arrays["s"]), arrays["s"].shape[1])))
+        self.n_points = len(counts)
+        self.groups, self.rows = [], []
+        for n in np.unique(counts):
+            rows = np.flatnonzero(counts == n)
+            self.groups.append(from_state_arrays(unpadded(
+                {k: v[rows] for k, v in arrays.items()}, int(n))))
+            self.rows.append(rows)
         self.theta_prev = np.asarray(state["theta_prev"], float).copy()
         self.assignment = np.asarray(state["assignment"]).copy()
         n = len(self.theta_prev)
@@ -153,29 +260,34 @@ class RVEMaterial:
 
     def point_fields(self) -> dict[str, np.ndarray]:
         """Per-point RVE quantities for VTK frames and history: porosity, coordination,
-        mean accumulated rotation [rad] and its rate [rad/s] (seed Eq. 15, Fig. 15)."""
-        if self.batch is None:
+        mean accumulated rotation [rad] and its rate [rad/s] (seed Eq. 15, Fig. 15), the
+        RVE's own eps_v and its sphere count (which grows when its cell is retiled)."""
+        if not self.groups:
             return {}
         return {
-            "porosity": self.batch.porosity(),
-            "coordination": homogenise.coordination(self.batch),
-            "mean_rotation": homogenise.mean_rotation(self.batch),
+            "porosity": self._per_point(lambda b: b.porosity()),
+            "coordination": self._per_point(homogenise.coordination),
+            "mean_rotation": self._per_point(homogenise.mean_rotation),
             "rotation_rate": self.spin_rate,
-            "rve_eps_v": homogenise.volumetric_strain(self.batch),
+            "rve_eps_v": self._per_point(homogenise.volumetric_strain),
+            "rve_particles": self._per_point(
+                lambda b: np.full(b.n_rve, float(b.n_particles))),
         }
 
     @staticmethod
     def merge_states(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
         """One state from the states of several sets of points (checkpoint parts written
-        by different ranks), in order; neighbour-list capacities may differ."""
-        batches = [from_state_arrays({k: p[f"rve_{k}"] for k in STATE_FIELDS})
-                   for p in parts]
-        batches = [b for b in batches if b.n_rve] or batches[:1]
-        out = {f"rve_{k}": v for k, v in state_arrays(concatenate(batches)).items()}
+        by different ranks), in order; sphere counts and list capacities may differ."""
+        def count(p):
+            return np.asarray(p.get("rve_particles", np.full(len(p["rve_s"]),
+                                                             p["rve_s"].shape[1])))
+        n = max(p["rve_s"].shape[1] for p in parts)
+        k = max(p["rve_nbr_j"].shape[2] for p in parts)
+        padded_parts = [padded({f: p[f"rve_{f}"] for f in STATE_FIELDS}, n, k)
+                        for p in parts]
+        out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in STATE_FIELDS}
+        out["rve_particles"] = np.concatenate([count(p) for p in parts])
         for key in ("theta_prev", "spin_rate", "assignment", "work"):
             if all(key in p for p in parts):
                 out[key] = np.concatenate([p[key] for p in parts])
         return out
-
-    def _arrays(self) -> dict[str, np.ndarray]:
-        return state_arrays(self.batch if self.batch is not None else self._none)

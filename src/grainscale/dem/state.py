@@ -155,6 +155,38 @@ def state_arrays(b: RVEBatch) -> dict[str, np.ndarray]:
     return {name: getattr(b, name) for name in STATE_FIELDS}
 
 
+# state fields with a per-sphere axis (axis 1) and with a neighbour-slot axis (axis 2)
+SPHERE_FIELDS = ("s", "v", "w", "rot", "radius", "mass", "inertia", "nbr_j", "nbr_shift",
+                 "nbr_count", "ft", "s_ref")
+SLOT_FIELDS = ("nbr_j", "nbr_shift", "ft")
+
+
+def padded(arrays: dict[str, np.ndarray], n: int, k: int) -> dict[str, np.ndarray]:
+    """`state_arrays` of RVEs with up to n spheres and k neighbour slots, zero-padded to
+    exactly n and k, so RVEs of different sizes fit in one table (checkpoints). The
+    padding is inert: empty neighbour rows, spheres of zero radius, cut off on reading."""
+    out = {}
+    for name, v in arrays.items():
+        shape = list(v.shape)
+        if name in SPHERE_FIELDS:
+            shape[1] = n
+        if name in SLOT_FIELDS:
+            shape[2] = k
+        if shape == list(v.shape):
+            out[name] = v
+            continue
+        fill = 13 if name == "nbr_shift" else 0  # 13: the image code of no shift
+        w = np.full(shape, fill, v.dtype)
+        w[tuple(slice(0, m) for m in v.shape)] = v
+        out[name] = w
+    return out
+
+
+def unpadded(arrays: dict[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
+    """The first n spheres of padded state arrays (RVEs that all have n spheres)."""
+    return {name: v[:, :n] if name in SPHERE_FIELDS else v for name, v in arrays.items()}
+
+
 def from_state_arrays(arrays: dict[str, np.ndarray]) -> RVEBatch:
     """Rebuild a batch from `state_arrays` output; scratch is re-allocated."""
     r, n, k = arrays["nbr_j"].shape

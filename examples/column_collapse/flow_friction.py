@@ -1,0 +1,195 @@
+"""How strong are the flowing RVEs of a column collapse, and why? Three diagnostics.
+
+    python examples/column_collapse/flow_friction.py frames OUT
+        mobilised friction sin(phi) = (s1 - s3)/(s1 + s3) of flowing (|v| > 5 cm/s) and
+        resting (|v| < 5 mm/s) points in every VTK frame of a finished run;
+    python examples/column_collapse/flow_friction.py record CASE OUT [--until 2.5]
+        runs CASE to `until` tau_c after release, recording every step's dH, dt and
+        stress per point and every RVE's state at release (OUT/record.npz, snapshot.npz);
+    python examples/column_collapse/flow_friction.py replay OUT [--points 8]
+        replays the recorded dH of the most sheared points on their RVEs taken at
+        release, alone, as a 2x2x2 supercell (the same grains, eight times) and with
+        retiling, and prints the median mobilised friction of each over 0.5-2.5 tau_c.
+
+The replay is the MPM's exact deformation history without the MPM: the RVE's answer
+to it depends only on the RVE, so differences between the variants are the cell's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+TAU_C = 0.0782  # s, sqrt(H_i / g) of the seed's column
+
+
+def mobilised(sig: np.ndarray) -> np.ndarray:
+    """sin(phi_mob) = (s1 - s3)/(s1 + s3) of Cauchy stresses (..., 3, 3), tension positive."""
+    s = -0.5 * (sig + np.swapaxes(sig, -1, -2))
+    ev = np.linalg.eigvalsh(s)
+    return (ev[..., 2] - ev[..., 0]) / np.maximum(ev[..., 2] + ev[..., 0], 1e-12)
+
+
+def degrees(x) -> float:
+    return float(np.degrees(np.arcsin(np.clip(x, -1, 1))))
+
+
+def frames(out: Path) -> None:
+    import meshio
+
+    print("frame  flowing: n  phi_mob quartiles [deg]   resting: n  phi_mob quartiles")
+    for f in sorted(glob.glob(str(out / "frames" / "frame_*.vtu"))):
+        d = meshio.read(f).point_data
+        phi = mobilised(d["stress"].reshape(-1, 3, 3))
+        v = np.linalg.norm(d["velocity"], axis=1)
+        row = [Path(f).stem[-5:]]
+        for sel in ((v > 0.05) & (d["p"] > 30), (v < 0.005) & (d["p"] > 30)):
+            q = [degrees(x) for x in np.percentile(phi[sel], [25, 50, 75])] if sel.any() \
+                else [np.nan] * 3
+            row.append(f"{sel.sum():4d}  " + " ".join(f"{x:5.1f}" for x in q))
+        print("   ".join(row))
+
+
+def record(case: Path, out: Path, until: float) -> None:
+    import tomli_w
+
+    import grainscale.coupling.driver as driver
+    from grainscale.coupling import rve_material
+    from grainscale.dem.state import state_arrays
+
+    cfg = tomllib.loads(case.read_text())
+    cfg["time"]["end"] = until * TAU_C
+    cfg.setdefault("output", {})["checkpoint_every"] = 0
+    for m in cfg.get("materials", {}).values():
+        if m.get("type") == "dem" and m.get("packings"):
+            m["packings"] = [str((case.parent / p).resolve()) for p in m["packings"]]
+    out.mkdir(parents=True, exist_ok=True)
+    short = out / "case.toml"
+    short.write_text(tomli_w.dumps(cfg))
+    now = {"t": None}
+    rec = {"dH": [], "dt": [], "sig": [], "t": []}
+    snap = {}
+    step, update = driver.step, rve_material.RVEMaterial.update
+
+    def timed_step(s, dt):
+        now["t"] = s.time
+        return step(s, dt)
+
+    def recording_update(self, dH, dt, stress):
+        released = now["t"] is not None and now["t"] >= 0
+        if released and not snap:
+            if len(self.groups) > 1:
+                raise RuntimeError("cells were retiled before release; record with "
+                                   "retile_width = 0")
+            snap.update(state_arrays(self.groups[0].copy()), dt_crit=self.dt_crit)
+        update(self, dH, dt, stress)
+        if released:
+            for key, v in (("dH", dH.copy()), ("dt", dt), ("sig", stress.copy()),
+                           ("t", now["t"])):
+                rec[key].append(v)
+
+    driver.step, rve_material.RVEMaterial.update = timed_step, recording_update
+    driver.run_case(short, out, checkpoint_every=0)
+    np.savez(out / "record.npz", **{k: np.array(v) for k, v in rec.items()})
+    np.savez(out / "snapshot.npz", **snap)
+    print(f"recorded {len(rec['dt'])} steps after release into {out}")
+
+
+def replay(out: Path, n_points: int) -> None:
+    from grainscale.config.rve import RVEParams
+    from grainscale.coupling.rve_material import RVEMaterial
+    from grainscale.dem.state import STATE_FIELDS, from_packing, from_state_arrays
+    from grainscale.mpm.step import SimulationError
+
+    rec = np.load(out / "record.npz")
+    snap = dict(np.load(out / "snapshot.npz"))
+    params = RVEParams(**tomllib.loads((out / "case.toml").read_text())["rve"])
+    dH, dts, sig_run, t = rec["dH"], rec["dt"], rec["sig"], rec["t"]
+    window = t > 0.5 * TAU_C
+    sym = 0.5 * (dH + np.swapaxes(dH, 2, 3))
+    dev = sym - np.trace(sym, axis1=2, axis2=3)[..., None, None] * np.eye(3) / 3
+    shear = np.linalg.norm(dev, axis=(2, 3))[window].sum(0)
+    p_mean = (-np.trace(sig_run, axis1=2, axis2=3) / 3)[window].mean(0)
+    loaded = np.flatnonzero(p_mean > 100)
+    points = loaded[np.argsort(shear[loaded])[::-1][:n_points]]
+    one = from_state_arrays({k: snap[k][points] for k in STATE_FIELDS})
+
+    def supercell(r):
+        h = one.h[r]
+        x = one.s[r] @ h.T
+        shifts = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+        big = from_packing(2 * h, np.concatenate([x + s @ h.T for s in shifts]),
+                           np.tile(one.radius[r], 8), params.density)
+        rng = np.random.default_rng(r)  # break the copies' symmetry, far below the noise
+        big.v[0] = np.tile(one.v[r], (8, 1)) + 1e-9 * rng.standard_normal(big.v[0].shape)
+        big.w[0] = np.tile(one.w[r], (8, 1))
+        big.h0[0] = 2 * one.h0[r]
+        return big
+
+    def alone(r):  # the same state rebuilt from positions (contact history restarts)
+        b = from_packing(one.h[r], one.s[r] @ one.h[r].T, one.radius[r], params.density)
+        b.v[0], b.w[0], b.h0[0] = one.v[r], one.w[r], one.h0[r]
+        return b
+
+    def run(batch, p, retile_width=0.0):
+        mat = RVEMaterial("replay", params, [batch], 1, retile_width=retile_width)
+        mat.groups, mat.dt_crit = [batch], float(snap["dt_crit"])
+        sig = mat.initial_stress()
+        out_sig = []
+        for k in range(len(dts)):
+            try:
+                mat.update(dH[k, p][None], dts[k], sig)
+            except SimulationError:
+                break  # too thin: the rest of this variant is missing
+            out_sig.append(sig[0].copy())
+        return np.array(out_sig)
+
+    variants = {
+        "as run": lambda r: one.take([r]),
+        "rebuilt": alone,
+        "2x2x2": supercell,
+        "retiled": lambda r: one.take([r]),
+    }
+    print(f"points {points.tolist()}; median phi_mob [deg] and p [Pa] over 0.5-2.5 tau_c")
+    print(f"{'point':>5} " + " ".join(f"{v:>16}" for v in variants))
+    table = {v: [] for v in variants}
+    for r, p in enumerate(points):
+        cells = []
+        for name, make in variants.items():
+            s = run(make(r), p, retile_width=4.0 if name == "retiled" else 0.0)
+            w = window[:len(s)]
+            mu = float(np.median(mobilised(s[w])))
+            table[name].append(mu)
+            pres = float(np.median(-np.trace(s[w], axis1=1, axis2=2) / 3))
+            cells.append(f"{degrees(mu):7.1f} {pres:6.0f} Pa")
+        print(f"{p:5d} " + " ".join(f"{c:>16}" for c in cells), flush=True)
+    print("median " + " ".join(f"{degrees(np.median(v)):16.1f}" for v in table.values()))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    f = sub.add_parser("frames")
+    f.add_argument("out", type=Path)
+    r = sub.add_parser("record")
+    r.add_argument("case", type=Path)
+    r.add_argument("out", type=Path)
+    r.add_argument("--until", type=float, default=2.5, help="tau_c after release")
+    p = sub.add_parser("replay")
+    p.add_argument("out", type=Path)
+    p.add_argument("--points", type=int, default=8)
+    a = ap.parse_args()
+    if a.command == "frames":
+        frames(a.out)
+    elif a.command == "record":
+        record(a.case, a.out, a.until)
+    else:
+        replay(a.out, a.points)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,111 @@
+"""Doubling a periodic cell that has become too thin: the same system, twice the grains.
+
+A cell stretched in one direction (the flowing front of a column, an extension zone)
+becomes thin across its other faces. Lattice reduction (lattice.py) cannot help: a
+stretch is not a shear. A periodic assembly is unchanged, though, if its cell is taken
+twice as long along one edge with the grains repeated once: h' = h with edge k doubled,
+every grain i present as i (copy 0) and i + N (copy 1, shifted by the old edge a_k).
+Positions, velocities, spins, forces and the Love-Weber stress (a sum over twice the
+contacts in twice the volume) are those of the original at that instant, and every
+contact keeps its tangential history; from then on the two copies may decorrelate,
+which is the point: the cell is now twice as wide across the faces that edge k spans.
+
+The width across the faces spanned by edges i and j is w_k = det h / |a_i x a_j|.
+Doubling edge k doubles det h, hence w_k, and leaves the other two widths (their face
+areas double too): the edge to double is k = argmin w.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grainscale.dem.cell import perpendicular_widths
+from grainscale.dem.neighbours import INVALID_SHIFT
+from grainscale.dem.state import RVEBatch, allocate, grow_capacity
+
+
+def thin_axis(h: np.ndarray) -> tuple[int, float]:
+    """(k, w_k): the edge whose doubling widens the cell most, and the width across it [m]."""
+    w = perpendicular_widths(np.ascontiguousarray(h))
+    k = int(np.argmin(w))
+    return k, float(w[k])
+
+
+def _decode(codes: np.ndarray) -> np.ndarray:
+    c = codes.astype(np.int64)
+    return np.stack([c // 9 - 1, (c // 3) % 3 - 1, c % 3 - 1], axis=-1)
+
+
+def _encode(t: np.ndarray) -> np.ndarray:
+    return (t[:, 0] + 1) * 9 + (t[:, 1] + 1) * 3 + (t[:, 2] + 1)
+
+
+def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
+    """RVE r of batch b with its cell doubled along edge k: a one-RVE batch of 2N grains.
+
+    Fractional coordinates along k halve (copy 1 adds 1/2); a neighbour entry (i, j,
+    image t) becomes, for each copy c of i, the pair (i + cN, j + c'N) with
+    c' = (c + t_k) mod 2 and new image t'_k = floor((c + t_k) / 2), other components
+    unchanged; it is stored in the row of the smaller index (with the image and the
+    tangential force negated when the pair is reversed). The rebuild before the next
+    step matches these entries by partner and image, so every contact keeps its history.
+    """
+    n = b.n_particles
+    out = allocate(1, 2 * n, 2 * b.capacity)
+    scale = np.ones(3)
+    scale[k] = 2.0
+    out.h[0] = b.h[r] * scale[None, :]
+    out.h0[0] = b.h0[r] * scale[None, :]
+    out.h_ref[0] = out.h[0]
+    s = b.s[r].copy()
+    s[:, k] *= 0.5
+    s1 = s.copy()
+    s1[:, k] += 0.5
+    out.s[0] = np.concatenate([s, s1])
+    out.s_ref[0] = out.s[0]
+    for name in ("v", "w", "rot", "radius", "mass", "inertia", "force", "torque"):
+        getattr(out, name)[0] = np.concatenate([getattr(b, name)[r]] * 2)
+    for name in ("L", "stress", "stress_servo", "stiffness", "step_count", "unbalanced"):
+        getattr(out, name)[0] = getattr(b, name)[r]
+    out.ncontact[0] = 2 * b.ncontact[r]
+    out.kinetic[0] = 2 * b.kinetic[r]
+    out.need_rebuild[0] = 1
+
+    cnt = b.nbr_count[r]
+    rows, slots = np.nonzero(np.arange(b.capacity)[None, :] < cnt[:, None])
+    codes = b.nbr_shift[r][rows, slots]
+    keep = codes != INVALID_SHIFT  # entries already marked for removal stay removed
+    rows, slots = rows[keep], slots[keep]
+    j = b.nbr_j[r][rows, slots].astype(np.int64)
+    t = _decode(b.nbr_shift[r][rows, slots])
+    ft = b.ft[r][rows, slots]
+    pair_a, pair_b, shifts, forces = [], [], [], []
+    for c in (0, 1):
+        ck = c + t[:, k]
+        c2 = np.mod(ck, 2)
+        tn = t.copy()
+        tn[:, k] = np.floor_divide(ck, 2)
+        pair_a.append(rows + c * n)
+        pair_b.append(j + c2 * n)
+        shifts.append(tn)
+        forces.append(ft)
+    a = np.concatenate(pair_a)
+    bb = np.concatenate(pair_b)
+    t = np.concatenate(shifts)
+    f = np.concatenate(forces)
+    swap = bb < a
+    a, bb = np.where(swap, bb, a), np.where(swap, a, bb)
+    t[swap] *= -1
+    f[swap] *= -1
+    order = np.lexsort((bb, a))
+    a, bb, t, f = a[order], bb[order], t[order], f[order]
+    counts = np.bincount(a, minlength=2 * n)
+    if counts.max(initial=0) > out.capacity:
+        out = grow_capacity(out, int(counts.max()))
+    slot = np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
+    out.nbr_j[0][a, slot] = bb
+    out.nbr_shift[0][a, slot] = _encode(t)
+    out.ft[0][a, slot] = f
+    out.nbr_count[0] = counts
+    return out
+
