@@ -8,8 +8,10 @@
         stress per point and every RVE's state at release (OUT/record.npz, snapshot.npz);
     python examples/column_collapse/flow_friction.py replay OUT [--points 8]
         replays the recorded dH of the most sheared points on their RVEs taken at
-        release, alone, as a 2x2x2 supercell (the same grains, eight times) and with
-        retiling, and prints the median mobilised friction of each over 0.5-2.5 tau_c.
+        release: as run, rebuilt from positions (tangential history restarts, the
+        control for supercells), as n x n x n supercells (the same grains n^3 times,
+        --tiles 2 3) and with retiling, and prints the median mobilised friction of
+        each over 0.5-2.5 tau_c.
 
 The replay is the MPM's exact deformation history without the MPM: the RVE's answer
 to it depends only on the RVE, so differences between the variants are the cell's.
@@ -99,7 +101,7 @@ def record(case: Path, out: Path, until: float) -> None:
     print(f"recorded {len(rec['dt'])} steps after release into {out}")
 
 
-def replay(out: Path, n_points: int) -> None:
+def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
     from grainscale.config.rve import RVEParams
     from grainscale.coupling.rve_material import RVEMaterial
     from grainscale.dem.state import STATE_FIELDS, from_packing, from_state_arrays
@@ -115,19 +117,20 @@ def replay(out: Path, n_points: int) -> None:
     shear = np.linalg.norm(dev, axis=(2, 3))[window].sum(0)
     p_mean = (-np.trace(sig_run, axis1=2, axis2=3) / 3)[window].mean(0)
     loaded = np.flatnonzero(p_mean > 100)
-    points = loaded[np.argsort(shear[loaded])[::-1][:n_points]]
+    points = loaded[np.argsort(shear[loaded])[::-1][skip:skip + n_points]]
     one = from_state_arrays({k: snap[k][points] for k in STATE_FIELDS})
 
-    def supercell(r):
+    def supercell(r, n):
         h = one.h[r]
         x = one.s[r] @ h.T
-        shifts = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
-        big = from_packing(2 * h, np.concatenate([x + s @ h.T for s in shifts]),
-                           np.tile(one.radius[r], 8), params.density)
+        shifts = np.array([[i, j, k] for i in range(n) for j in range(n) for k in range(n)],
+                          float)
+        big = from_packing(n * h, np.concatenate([x + s @ h.T for s in shifts]),
+                           np.tile(one.radius[r], n**3), params.density)
         rng = np.random.default_rng(r)  # break the copies' symmetry, far below the noise
-        big.v[0] = np.tile(one.v[r], (8, 1)) + 1e-9 * rng.standard_normal(big.v[0].shape)
-        big.w[0] = np.tile(one.w[r], (8, 1))
-        big.h0[0] = 2 * one.h0[r]
+        big.v[0] = np.tile(one.v[r], (n**3, 1)) + 1e-9 * rng.standard_normal(big.v[0].shape)
+        big.w[0] = np.tile(one.w[r], (n**3, 1))
+        big.h0[0] = n * one.h0[r]
         return big
 
     def alone(r):  # the same state rebuilt from positions (contact history restarts)
@@ -148,12 +151,9 @@ def replay(out: Path, n_points: int) -> None:
             out_sig.append(sig[0].copy())
         return np.array(out_sig)
 
-    variants = {
-        "as run": lambda r: one.take([r]),
-        "rebuilt": alone,
-        "2x2x2": supercell,
-        "retiled": lambda r: one.take([r]),
-    }
+    variants = {"as run": lambda r: one.take([r]), "rebuilt": alone,
+                **{f"{n}x{n}x{n}": (lambda r, n=n: supercell(r, n)) for n in tiles},
+                "retiled": lambda r: one.take([r])}
     print(f"points {points.tolist()}; median phi_mob [deg] and p [Pa] over 0.5-2.5 tau_c")
     print(f"{'point':>5} " + " ".join(f"{v:>16}" for v in variants))
     table = {v: [] for v in variants}
@@ -181,14 +181,17 @@ def main() -> None:
     r.add_argument("--until", type=float, default=2.5, help="tau_c after release")
     p = sub.add_parser("replay")
     p.add_argument("out", type=Path)
-    p.add_argument("--points", type=int, default=8)
+    p.add_argument("--points", type=int, default=8, help="how many of the most sheared")
+    p.add_argument("--skip", type=int, default=0, help="skip the most sheared SKIP points")
+    p.add_argument("--tiles", type=int, nargs="+", default=[2],
+                   help="supercells of n x n x n copies (n >= 2)")
     a = ap.parse_args()
     if a.command == "frames":
         frames(a.out)
     elif a.command == "record":
         record(a.case, a.out, a.until)
     else:
-        replay(a.out, a.points)
+        replay(a.out, a.points, a.tiles, a.skip)
 
 
 if __name__ == "__main__":

@@ -169,14 +169,13 @@ class RVEMaterial:
         for g, (batch, rows) in enumerate(zip(self.groups, self.rows, strict=True)):
             if 2 * batch.n_particles > self.max_particles:
                 continue
-            keep = np.ones(batch.n_rve, bool)
-            for r in range(batch.n_rve):
-                k, width = retile.thin_axis(batch.h[r])
-                if width < self.retile_width * 2.0 * batch.radius[r].mean():
-                    moved.setdefault(2 * batch.n_particles, []).append(
-                        (int(rows[r]), retile.double_cell(batch, r, k)))
-                    keep[r] = False
-            if not keep.all():
+            w = retile.widths(batch.h)
+            thin = w.min(axis=1) < self.retile_width * 2.0 * batch.radius.mean(axis=1)
+            keep = ~thin
+            for r in np.flatnonzero(thin):
+                moved.setdefault(2 * batch.n_particles, []).append(
+                    (int(rows[r]), retile.double_cell(batch, r, int(np.argmin(w[r])))))
+            if thin.any():
                 self.groups[g] = batch.take(np.flatnonzero(keep))
                 self.rows[g] = rows[keep]
         for n, items in moved.items():

@@ -31,6 +31,14 @@ def thin_axis(h: np.ndarray) -> tuple[int, float]:
     return k, float(w[k])
 
 
+def widths(h: np.ndarray) -> np.ndarray:
+    """(R,3) perpendicular widths w_k = |det h| / |a_i x a_j| of a batch of cells [m]."""
+    a = np.swapaxes(h, 1, 2)  # a[:, k] is edge k
+    areas = np.stack([np.linalg.norm(np.cross(a[:, (k + 1) % 3], a[:, (k + 2) % 3]), axis=1)
+                      for k in range(3)], axis=1)
+    return np.abs(np.linalg.det(h))[:, None] / areas
+
+
 def _decode(codes: np.ndarray) -> np.ndarray:
     c = codes.astype(np.int64)
     return np.stack([c // 9 - 1, (c // 3) % 3 - 1, c % 3 - 1], axis=-1)
