@@ -186,3 +186,19 @@ def test_state_of_mixed_size_rves_round_trips_bitwise(small_rve):
         merged.update(dH, 1e-3, s_merged)
     assert np.array_equal(s_whole, s_full)
     assert np.array_equal(s_merged, s_full)
+
+
+def test_a_retile_width_below_the_search_limit_is_refused(small_rve):
+    """150 spheres of radii 3-7 mm: cells narrower than 2 (2 r_max + skin) ~ 2.9 mean
+    diameters stop the run, so a retile width at or below that is an input error."""
+    from grainscale.config.base import ConfigError
+    from grainscale.coupling.materials import check_retile_width
+    from grainscale.dem.generate import contact_params
+
+    params, packing = small_rve
+    skin = contact_params(params).skin
+    check_retile_width("sand", 4.0, [packing], skin)
+    check_retile_width("sand", 0.0, [packing], skin)  # off
+    with pytest.raises(ConfigError, match=r"materials\.sand\.retile_width = 2\.5: must "
+                                          r"exceed 2\.\d+ mean grain diameters"):
+        check_retile_width("sand", 2.5, [packing], skin)

@@ -17,7 +17,7 @@ from grainscale.config.case import Case
 from grainscale.config.rve import RVEParams
 from grainscale.coupling.rve_material import RVEMaterial, bulk_density
 from grainscale.dem.commands import load_packing
-from grainscale.dem.generate import generate
+from grainscale.dem.generate import contact_params, generate
 from grainscale.dem.state import RVEBatch
 from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
@@ -56,6 +56,22 @@ def packing_library(case: Case, name: str, case_dir: Path, out: Path,
             for k in range(cfg.library)]
 
 
+def check_retile_width(name: str, width: float, library: list[RVEBatch], skin: float
+                       ) -> None:
+    """A retile width (mean grain diameters) must exceed the narrowest cell the
+    neighbour search accepts, 2 (2 r_max + skin), or cells would stop the run before
+    they are doubled."""
+    if width <= 0:
+        return
+    least = max(2 * (2 * b.radius[0].max() + skin) / (2 * b.radius[0].mean())
+                for b in library)
+    if width <= least:
+        raise ConfigError(f"materials.{name}.retile_width = {width}: must exceed {least:.3g} "
+                          "mean grain diameters for these packings (the narrowest cell the "
+                          "neighbour search accepts, 2 (2 r_max + skin)), or be 0 (never "
+                          "retile)")
+
+
 def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
     """Packings of every "dem" material; sets their bulk density in the case and
     returns the `material_factory` for `mpm.setup.build_state` (None if none)."""
@@ -64,6 +80,7 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
         if cfg.type != "dem":
             continue
         lib = packing_library(case, name, case_dir, out, progress)
+        check_retile_width(name, cfg.retile_width, lib, contact_params(case.rve).skin)
         cfg.density = bulk_density(lib)
         libraries[name] = lib
     if not libraries:
