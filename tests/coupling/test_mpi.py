@@ -22,7 +22,7 @@ import pytest
 import tomli_w
 
 from grainscale.cli import main
-from grainscale.dem.retile import thin_axis
+from grainscale.dem.retile import widths
 from grainscale.io.rve_h5 import read_rve_state
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -77,6 +77,17 @@ def mpirun(n: int, args: list[str], timeout: float = 300, script: Path | None = 
     target = [str(script)] if script else ["-m", "grainscale"]
     return subprocess.run([MPIEXEC, "-n", str(n), sys.executable, *target, *args], env=env,
                           capture_output=True, text=True, timeout=timeout)
+
+
+def interrupted_history(case: Path, out: Path, first: int, steps: int, then: int) -> str:
+    """history.csv of CASE run on `first` ranks for `steps` steps (checkpoints every 4),
+    then resumed to the end on `then` ranks."""
+    common = ["run", str(case), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
+    r = mpirun(first, [*common, "--max-steps", str(steps)])
+    assert r.returncode == 0, r.stderr
+    r = mpirun(then, [*common, "--resume"])
+    assert r.returncode == 0, r.stderr
+    return (out / "history.csv").read_text()
 
 
 @pytest.fixture(scope="module")
@@ -137,12 +148,7 @@ def test_rebalancing_moves_points_without_changing_results(rve_case, serial, tmp
     path = tmp_path / "rebalanced.toml"
     path.write_text(tomli_w.dumps(case))
     out = tmp_path / "out"
-    common = ["run", str(path), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
-    r = mpirun(3, [*common, "--max-steps", "10"])
-    assert r.returncode == 0, r.stderr
-    r = mpirun(2, [*common, "--resume"])
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == serial
+    assert interrupted_history(path, out, first=3, steps=10, then=2) == serial
     cost = json.loads((out / "cost.json").read_text())
     assert cost["rebalances"] >= 2
     assert cost["imbalance_after_last"] <= cost["imbalance_before_last"]
@@ -180,8 +186,6 @@ def update(self, dH, dt, stress):
 
 rve_material.RVEMaterial.update = update
 from grainscale.cli import main
-from grainscale.dem.retile import thin_axis
-from grainscale.io.rve_h5 import read_rve_state
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -239,14 +243,14 @@ def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp
     sizes, split over ranks, checkpointed padded to one size and resumed on another rank
     count, give the serial history. The threshold lies between the packings' initial
     narrowest widths, so the points of some packings double at the first step."""
-    widths = []
+    narrowest = []
     for f in sorted((serial_out / "packings").glob("sand_*.h5")):
         b, _ = read_rve_state(f)
-        widths.append(thin_axis(b.h[0])[1] / (2 * b.radius[0].mean()))
-    widths = sorted(widths)
-    assert widths[1] < widths[2]
+        narrowest.append(widths(b.h)[0].min() / (2 * b.radius[0].mean()))
+    narrowest = sorted(narrowest)
+    assert narrowest[1] < narrowest[2]
     case = tomllib.loads(rve_case.read_text())
-    case["materials"]["sand"].update({"retile_width": 0.5 * (widths[1] + widths[2]),
+    case["materials"]["sand"].update({"retile_width": 0.5 * (narrowest[1] + narrowest[2]),
                                       "retile_max_factor": 2})
     path = tmp_path / "retiled.toml"
     path.write_text(tomli_w.dumps(case))
@@ -255,11 +259,6 @@ def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp
     history = (ref / "history.csv").read_text()
     assert history != (serial_out / "history.csv").read_text()  # the doubling took place
     out = tmp_path / "part"
-    common = ["run", str(path), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
-    r = mpirun(2, [*common, "--max-steps", "9"])
-    assert r.returncode == 0, r.stderr
-    r = mpirun(3, [*common, "--resume"])
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == history
+    assert interrupted_history(path, out, first=2, steps=9, then=3) == history
     sizes = meshio.read(sorted((out / "frames").glob("frame_*.vtu"))[-1]).point_data
     assert set(np.unique(sizes["rve_particles"])) == {120.0, 240.0}

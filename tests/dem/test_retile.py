@@ -8,7 +8,7 @@ from dem_helpers import agitated_dense_state
 
 from grainscale.dem import engine
 from grainscale.dem.cell import perpendicular_widths
-from grainscale.dem.retile import double_cell, thin_axis, widths
+from grainscale.dem.retile import double_cell, widths
 
 
 @pytest.mark.parametrize("k", [0, 1, 2])
@@ -51,14 +51,15 @@ def test_doubled_cell_is_the_same_periodic_system(k):
         assert c.ncontact[0] == 2 * b.ncontact[0]
 
 
-def test_thin_axis_is_the_narrowest_width():
+def test_batch_widths_and_the_edge_to_double():
+    """Doubling the edge across the narrowest face pair (the one `_retile` picks) widens
+    the narrowest width; the batch widths equal the kernel's per-cell ones."""
     h = np.diag([3.0, 1.0, 2.0])
     h[0, 1] = 0.5  # a sheared cell: widths are not the edge lengths
-    k, w = thin_axis(h)
-    each = perpendicular_widths(h)
-    assert k == int(np.argmin(each)) and w == each.min()
+    w = widths(h[None])[0]
+    k = int(np.argmin(w))
     h2 = h.copy()
     h2[:, k] *= 2
-    assert perpendicular_widths(h2).min() > w
+    assert widths(h2[None])[0].min() > w.min()
     np.testing.assert_allclose(widths(np.stack([h, h2])),
                                [perpendicular_widths(h), perpendicular_widths(h2)], rtol=1e-12)

@@ -43,6 +43,12 @@ def bulk_density(library: list[RVEBatch]) -> float:
     return float(np.mean([b.mass[0].sum() / b.volume()[0] for b in library]))
 
 
+def _counts(state: dict[str, np.ndarray]) -> np.ndarray:
+    """(P,) spheres of each RVE of a saved state (older states: all the stored count)."""
+    s = state["rve_s"]
+    return np.asarray(state.get("rve_particles", np.full(len(s), s.shape[1])))
+
+
 class RVEMaterial:
     """Batched RVE material with the MPM material interface (mpm/materials/base.py).
 
@@ -115,6 +121,10 @@ class RVEMaterial:
                              "(cells were retiled); use .groups")
         return self.groups[0]
 
+    def particle_counts(self) -> np.ndarray:
+        """(P,) spheres of each point's RVE."""
+        return self._per_point(lambda b: np.full(b.n_rve, b.n_particles))
+
     def _per_point(self, f) -> np.ndarray:
         """f(group) (R_g, ...) of every group, scattered into point order (P, ...)."""
         parts = [np.asarray(f(b)) for b in self.groups]
@@ -165,35 +175,26 @@ class RVEMaterial:
         """Double every cell narrower than retile_width mean diameters (dem/retile.py)."""
         if self.retile_width <= 0:
             return
-        moved: dict[int, list[tuple[int, RVEBatch]]] = {}
-        for g, (batch, rows) in enumerate(zip(self.groups, self.rows, strict=True)):
-            if 2 * batch.n_particles > self.max_particles:
-                continue
+        pieces: dict[int, list[tuple[RVEBatch, np.ndarray]]] = {}  # by sphere count
+        for batch, rows in zip(self.groups, self.rows, strict=True):
+            n = batch.n_particles
             w = retile.widths(batch.h)
             thin = w.min(axis=1) < self.retile_width * 2.0 * batch.radius.mean(axis=1)
-            keep = ~thin
+            if 2 * n > self.max_particles or not thin.any():
+                pieces.setdefault(n, []).append((batch, rows))
+                continue
+            pieces.setdefault(n, []).append((batch.take(np.flatnonzero(~thin)), rows[~thin]))
             for r in np.flatnonzero(thin):
-                moved.setdefault(2 * batch.n_particles, []).append(
-                    (int(rows[r]), retile.double_cell(batch, r, int(np.argmin(w[r])))))
-            if thin.any():
-                self.groups[g] = batch.take(np.flatnonzero(keep))
-                self.rows[g] = rows[keep]
-        for n, items in moved.items():
-            sizes = [b.n_particles for b in self.groups]
-            new = concatenate([b for _, b in items])
-            ids = np.array([p for p, _ in items])
-            if n in sizes:
-                g = sizes.index(n)
-                new = concatenate([self.groups[g], new])
-                ids = np.concatenate([self.rows[g], ids])
-                self.groups[g], self.rows[g] = new, ids
-            else:
-                self.groups.append(new)
-                self.rows.append(ids)
-            self.retiled += len(items)
-        keep = [g for g, b in enumerate(self.groups) if b.n_rve]
-        self.groups = [self.groups[g] for g in keep]
-        self.rows = [self.rows[g] for g in keep]
+                pieces.setdefault(2 * n, []).append(
+                    (retile.double_cell(batch, r, int(np.argmin(w[r]))), rows[[r]]))
+                self.retiled += 1
+        self.groups, self.rows = [], []
+        for n in sorted(pieces):
+            parts = [(b, r) for b, r in pieces[n] if len(r)]
+            if parts:
+                self.groups.append(parts[0][0] if len(parts) == 1
+                                   else concatenate([b for b, _ in parts]))
+                self.rows.append(np.concatenate([r for _, r in parts]))
 
     def initial_stress(self) -> np.ndarray:
         """(P,3,3) Love-Weber stress of the prepared RVEs [Pa]."""
@@ -226,7 +227,7 @@ class RVEMaterial:
                     if name not in arrays:
                         arrays[name] = np.empty((self.n_points, *v.shape[1:]), v.dtype)
                     arrays[name][rows] = v
-            counts = self._per_point(lambda b: np.full(b.n_rve, b.n_particles))
+            counts = self.particle_counts()
         else:
             arrays = state_arrays(self._none)
             counts = np.zeros(0, np.int64)
@@ -240,8 +241,7 @@ class RVEMaterial:
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
         arrays = {k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS}
-        counts = np.asarray(state.get("rve_particles",
-                                      np.full(len(arrays["s"]), arrays["s"].shape[1])))
+        counts = _counts(state)
         self.n_points = len(counts)
         self.groups, self.rows = [], []
         for n in np.unique(counts):
@@ -269,23 +269,19 @@ class RVEMaterial:
             "mean_rotation": self._per_point(homogenise.mean_rotation),
             "rotation_rate": self.spin_rate,
             "rve_eps_v": self._per_point(homogenise.volumetric_strain),
-            "rve_particles": self._per_point(
-                lambda b: np.full(b.n_rve, float(b.n_particles))),
+            "rve_particles": self.particle_counts().astype(float),
         }
 
     @staticmethod
     def merge_states(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
         """One state from the states of several sets of points (checkpoint parts written
         by different ranks), in order; sphere counts and list capacities may differ."""
-        def count(p):
-            return np.asarray(p.get("rve_particles", np.full(len(p["rve_s"]),
-                                                             p["rve_s"].shape[1])))
         n = max(p["rve_s"].shape[1] for p in parts)
         k = max(p["rve_nbr_j"].shape[2] for p in parts)
         padded_parts = [padded({f: p[f"rve_{f}"] for f in STATE_FIELDS}, n, k)
                         for p in parts]
         out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in STATE_FIELDS}
-        out["rve_particles"] = np.concatenate([count(p) for p in parts])
+        out["rve_particles"] = np.concatenate([_counts(p) for p in parts])
         for key in ("theta_prev", "spin_rate", "assignment", "work"):
             if all(key in p for p in parts):
                 out[key] = np.concatenate([p[key] for p in parts])

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from grainscale.dem.cell import lattice_reduce
-from grainscale.dem.neighbours import INVALID_SHIFT
+from grainscale.dem.neighbours import INVALID_SHIFT, decode_shifts, encode_shifts
 from grainscale.dem.state import RVEBatch
 
 
@@ -30,11 +30,6 @@ def needs_reduction(h: np.ndarray, tol: float = 0.5 + 1e-9) -> np.ndarray:
     off = np.abs(g) / diag[:, None, :]  # |a_i . a_j| / |a_j|^2
     off[:, np.arange(3), np.arange(3)] = 0.0
     return np.any(off > tol, axis=(1, 2))
-
-
-def _decode(codes: np.ndarray) -> np.ndarray:
-    c = codes.astype(np.int64)
-    return np.stack([c // 9 - 1, (c // 3) % 3 - 1, c % 3 - 1], axis=-1)
 
 
 def reduce_cells(batch: RVEBatch, tol: float = 0.75) -> np.ndarray:
@@ -56,13 +51,13 @@ def reduce_cells(batch: RVEBatch, tol: float = 0.75) -> np.ndarray:
         cnt = batch.nbr_count[r]
         rows, slots = np.nonzero(np.arange(batch.capacity)[None, :] < cnt[:, None])
         j = batch.nbr_j[r][rows, slots]
-        k = _decode(batch.nbr_shift[r][rows, slots]) @ m_inv.T
+        k = decode_shifts(batch.nbr_shift[r][rows, slots]) @ m_inv.T
         k += (wrap[j] - wrap[rows]).astype(np.int64)
         ok = np.all(np.abs(k) <= 1, axis=1)
         # an image beyond the nearest ones cannot be within the cutoff of a reduced
         # cell: such entries get the invalid code, which the forced rebuild never matches
         codes = np.full(len(rows), INVALID_SHIFT, np.int64)
-        codes[ok] = (k[ok, 0] + 1) * 9 + (k[ok, 1] + 1) * 3 + (k[ok, 2] + 1)
+        codes[ok] = encode_shifts(k[ok])
         batch.nbr_shift[r][rows, slots] = codes.astype(np.uint8)
         batch.need_rebuild[r] = 1
     return todo

@@ -31,6 +31,17 @@ def shift_code(a: int, b: int, c: int) -> int:
     return (a + 1) * 9 + (b + 1) * 3 + (c + 1)
 
 
+def decode_shifts(codes: np.ndarray) -> np.ndarray:
+    """Image shift codes (M,) as integer shifts (M, 3) in {-1, 0, 1}^3."""
+    c = codes.astype(np.int64)
+    return np.stack([c // 9 - 1, (c // 3) % 3 - 1, c % 3 - 1], axis=-1)
+
+
+def encode_shifts(k: np.ndarray) -> np.ndarray:
+    """Integer shifts (M, 3) in {-1, 0, 1}^3 as codes (M,), as `shift_code` does."""
+    return (k[:, 0] + 1) * 9 + (k[:, 1] + 1) * 3 + (k[:, 2] + 1)
+
+
 @njit(cache=True)
 def image_table(h: np.ndarray, table: np.ndarray) -> None:
     """table[code] = h @ shift: the Cartesian offset of each of the 27 images [m]."""

@@ -19,16 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from grainscale.dem.cell import perpendicular_widths
-from grainscale.dem.neighbours import INVALID_SHIFT
+from grainscale.dem.neighbours import INVALID_SHIFT, decode_shifts, encode_shifts
 from grainscale.dem.state import RVEBatch, allocate, grow_capacity
-
-
-def thin_axis(h: np.ndarray) -> tuple[int, float]:
-    """(k, w_k): the edge whose doubling widens the cell most, and the width across it [m]."""
-    w = perpendicular_widths(np.ascontiguousarray(h))
-    k = int(np.argmin(w))
-    return k, float(w[k])
 
 
 def widths(h: np.ndarray) -> np.ndarray:
@@ -37,15 +29,6 @@ def widths(h: np.ndarray) -> np.ndarray:
     areas = np.stack([np.linalg.norm(np.cross(a[:, (k + 1) % 3], a[:, (k + 2) % 3]), axis=1)
                       for k in range(3)], axis=1)
     return np.abs(np.linalg.det(h))[:, None] / areas
-
-
-def _decode(codes: np.ndarray) -> np.ndarray:
-    c = codes.astype(np.int64)
-    return np.stack([c // 9 - 1, (c // 3) % 3 - 1, c % 3 - 1], axis=-1)
-
-
-def _encode(t: np.ndarray) -> np.ndarray:
-    return (t[:, 0] + 1) * 9 + (t[:, 1] + 1) * 3 + (t[:, 2] + 1)
 
 
 def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
@@ -85,7 +68,7 @@ def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
     keep = codes != INVALID_SHIFT  # entries already marked for removal stay removed
     rows, slots = rows[keep], slots[keep]
     j = b.nbr_j[r][rows, slots].astype(np.int64)
-    t = _decode(b.nbr_shift[r][rows, slots])
+    t = decode_shifts(b.nbr_shift[r][rows, slots])
     ft = b.ft[r][rows, slots]
     pair_a, pair_b, shifts, forces = [], [], [], []
     for c in (0, 1):
@@ -112,7 +95,7 @@ def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
         out = grow_capacity(out, int(counts.max()))
     slot = np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
     out.nbr_j[0][a, slot] = bb
-    out.nbr_shift[0][a, slot] = _encode(t)
+    out.nbr_shift[0][a, slot] = encode_shifts(t)
     out.ft[0][a, slot] = f
     out.nbr_count[0] = counts
     return out
