@@ -201,3 +201,68 @@ def test_a_retile_width_below_the_search_limit_is_refused(small_rve):
     with pytest.raises(ConfigError, match=r"materials\.sand\.retile_width = 2\.5: must "
                                           r"exceed 2\.\d+ mean grain diameters"):
         check_retile_width("sand", 2.5, [packing], skin)
+
+
+def _max_affine_stiffness(batch, cp):
+    """max_k C_kk of each RVE [Pa], C recomputed by engine.refresh (on a copy) from the
+    contacts at the batch's current configuration."""
+    from grainscale.dem import engine
+
+    b = engine.refresh(batch.copy(), cp)
+    return np.diagonal(b.stiffness, axis1=1, axis2=2).max(axis=1)
+
+
+@pytest.mark.parametrize("strain", [-0.01, 0.002])
+def test_wave_speed_follows_the_contact_network(small_rve, strain):
+    """MPM increments (no servo) change the contact network: 1 % isotropic compression
+    stiffens it (~370 -> ~460 contacts, c +8 %), 0.2 % extension opens a third of the
+    contacts (c -17 %). After every update the CFL wave speed is that of the contacts
+    of the update's last DEM step: replaying the increment's first n - 1 DEM steps on
+    a copy and recomputing C there gives the same value. It survives a restore."""
+    from grainscale.dem import engine
+
+    params, packing = small_rve
+    mat = RVEMaterial("sand", params, [packing], n_points=1)
+    stress = mat.initial_stress()
+
+    def speed(c):  # over the bulk density now, as the material divides it [m/s]
+        return math.sqrt(c / (packing.mass.sum() / mat.batch.volume()[0]))
+
+    c0 = mat.wave_speed()
+    assert c0 == pytest.approx(speed(_max_affine_stiffness(mat.batch, mat.cp)[0]), rel=1e-12)
+    dt = 20 * mat.dt_crit
+    dH = np.broadcast_to(math.expm1(strain / 10) * np.eye(3), (1, 3, 3))
+    for _ in range(10):
+        before = mat.batch.copy()
+        mat.update(dH, dt, stress)
+        n = mat.substeps
+        replay = engine.increment_control(before, dH, n, dt / n)
+        engine.advance(before, n - 1, dt / n, mat.cp, replay)
+        expected = speed(_max_affine_stiffness(before, mat.cp)[0])
+        assert mat.wave_speed() == pytest.approx(expected, rel=1e-12)
+    c1 = mat.wave_speed()
+    assert (c1 > 1.05 * c0) if strain < 0 else (c1 < 0.9 * c0), (c0, c1)
+    restored = RVEMaterial("sand", params, [packing], n_points=1)
+    restored.load_state({k: v.copy() for k, v in mat.state().items()})
+    assert restored.wave_speed() == c1
+
+
+def test_stress_handed_to_the_mpm_is_the_symmetric_part(small_rve):
+    """Right after a sudden undamped shear the grains' spins accelerate, so the
+    Love-Weber sum (1/V) sum d (x) f has a skew part (the net contact torque over V);
+    the MPM's stress array gets exactly sym(sigma), the RVE keeps its own sigma."""
+    params, packing = small_rve
+    params = params.model_copy(update={"damping": 0.0})
+    mat = RVEMaterial("sand", params, [packing], n_points=2)
+    stress = mat.initial_stress()
+    assert np.array_equal(stress, stress.transpose(0, 2, 1))
+    dH = np.zeros((2, 3, 3))
+    dH[:, 0, 2] = 2e-3  # simple shear in one MPM step of a few DEM steps
+    dH[1, 1, 2] = -1e-3
+    mat.update(dH, 4 * mat.dt_crit, stress)
+    sigma = mat.batch.stress
+    skew = 0.5 * (sigma - sigma.transpose(0, 2, 1))
+    p = homogenise.mean_stress(sigma)
+    assert np.all(np.abs(skew).max(axis=(1, 2)) > 1e-3 * p)  # a real skew part
+    assert np.array_equal(stress, stress.transpose(0, 2, 1))
+    assert np.array_equal(stress, 0.5 * (sigma + sigma.transpose(0, 2, 1)))

@@ -2,8 +2,9 @@
 
 Each MPM step hands every point's full incremental displacement gradient dH (spin
 included, seed Eq. 17) to its RVE: the cell is deformed h <- (I + dH) h over a whole
-number of DEM steps, and the homogenised Love-Weber stress (seed Eq. 11) goes back to
-the point. The RVEs of all points are one batch, stepped in parallel over RVEs.
+number of DEM steps, and the symmetric part of the homogenised Love-Weber stress (seed
+Eq. 11) goes back to the point. The RVEs of all points are one batch, stepped in
+parallel over RVEs.
 
 Time integration (docs/coupling.md):
 - "dynamic" (default): the RVE lives in real time. The MPM step dt is split into
@@ -41,6 +42,11 @@ from grainscale.mpm.step import SimulationError
 def bulk_density(library: list[RVEBatch]) -> float:
     """Mean grain mass per cell volume of the packings [kg/m^3]."""
     return float(np.mean([b.mass[0].sum() / b.volume()[0] for b in library]))
+
+
+def _sym(sigma: np.ndarray) -> np.ndarray:
+    """(sigma + sigma^T)/2 of (..., 3, 3) stresses [Pa]."""
+    return 0.5 * (sigma + np.swapaxes(sigma, -1, -2))
 
 
 def _counts(state: dict[str, np.ndarray]) -> np.ndarray:
@@ -135,7 +141,14 @@ class RVEMaterial:
 
     # ------------------------------------------------------------------ interface
     def update(self, dH: np.ndarray, dt: float, stress: np.ndarray) -> None:
-        """Deform each RVE by its dH over the step dt [s]; stress <- Love-Weber sigma."""
+        """Deform each RVE by its dH over the step dt [s]; stress <- sym(sigma) [Pa].
+
+        sigma = (1/V) sum_c d (x) f is the RVE's Love-Weber stress (kept as it is in the
+        batch); its skew part (the net contact torque over V, non-zero while grain spins
+        accelerate) belongs to no Cauchy stress, and the MPM's nodal force
+        f_a = -V sigma_ab dS/dx_b would take it transposed, so the MPM gets the symmetric
+        part. The batch's `stiffness` is then that of the current contacts (wave_speed).
+        """
         if not self.groups:
             return
         t0 = time.perf_counter()
@@ -160,7 +173,7 @@ class RVEMaterial:
                     f"material {self.name!r}, its point {point}: {err} (the run stops; "
                     "history and checkpoints so far are intact)") from None
             lattice.reduce_cells(batch)
-            stress[rows] = batch.stress
+            stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
             self.rve_steps += int(nsteps.sum())
             self.work[rows] += nsteps * (batch.n_particles + batch.ncontact)
@@ -197,15 +210,17 @@ class RVEMaterial:
                 self.rows.append(np.concatenate([r for _, r in parts]))
 
     def initial_stress(self) -> np.ndarray:
-        """(P,3,3) Love-Weber stress of the prepared RVEs [Pa]."""
-        return self._per_point(lambda b: b.stress)
+        """(P,3,3) sym(sigma) of the prepared RVEs' Love-Weber stress [Pa] (see update)."""
+        return self._per_point(lambda b: _sym(b.stress))
 
     def wave_speed(self) -> float:
         """Largest P-wave speed of the RVEs, sqrt(max_k C_kk / rho) of each [m/s].
 
-        max_k C_kk of an RVE (its affine stiffness, an upper bound of its constrained
-        modulus) over its own bulk density: conservative, so the CFL step is safe, and a
-        maximum over RVEs, so it does not depend on how RVEs are split over ranks.
+        C_kk = (1/V) sum_c kn |d|^2 n_k^4 [Pa] is the affine stiffness of an RVE's
+        contacts at the last DEM step of its last update (the kernel writes it there when
+        no servo runs), an upper bound of its constrained modulus, over its own bulk
+        density rho [kg/m^3]: conservative, so the CFL step is safe, and a maximum over
+        RVEs, so it does not depend on how RVEs are split over ranks.
         """
         speed = 0.0
         for b in self.groups:

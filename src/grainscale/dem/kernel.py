@@ -21,7 +21,9 @@ Per step of one RVE (dt fixed):
    particle spins w are fluctuations about W; a rigidly rotating cell therefore makes no
    slip at any contact (objectivity).
 3. Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
-   first particle and d = x_j - x_i, so compression is negative (tension positive).
+   first particle and d = x_j - x_i, so compression is negative (tension positive), and
+   the affine stiffness C_ab, on servo samples and on the last step of a call. Without
+   a servo, `stiffness` holds the last step's C (the MPM's wave speed reads it).
 4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion:
    v += dt (F - alpha |F| sign v)/m, same for rotation; s += h_new^-1 v dt;
    accumulated rotation += |w| dt.
@@ -331,7 +333,11 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
         last = _step == nsteps - 1
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
         sig_out = stress_servo if sample else stress
-        stiff_out = stiffness if sample else stiff_scratch
+        # the stiffness is the servo's sample under servo control; otherwise that of the
+        # last step, so the caller (the MPM's wave speed) sees the current contacts. The
+        # last step homogenises anyway: the write costs nothing
+        report = sample or (last and not servo_on)
+        stiff_out = stiffness if report else stiff_scratch
         ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L,
                                       nbr_j, nbr_shift, nbr_count, ft, force, torque, x,
                                       table, sig_out, stiff_out, sample or last)

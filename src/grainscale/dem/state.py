@@ -40,7 +40,8 @@ class RVEBatch:
     stress: np.ndarray       # (R,3,3) Love-Weber Cauchy stress, tension positive [Pa]
     stress_servo: np.ndarray  # (R,3,3) the stress the servo last sampled [Pa]
     step_count: np.ndarray   # (R,) int64 DEM steps taken (the servo samples on it)
-    stiffness: np.ndarray    # (R,3,3) affine stiffness C_ab for the servo [Pa]
+    stiffness: np.ndarray    # (R,3,3) affine stiffness C_ab: the servo's last sample, or
+    #                          without servo that of the last step (MPM wave speed) [Pa]
     h0: np.ndarray           # (R,3,3) reference cell for eps_v = ln(V/V0)
     nbr_j: np.ndarray        # (R,N,K) int32 neighbour index
     nbr_shift: np.ndarray    # (R,N,K) uint8 image shift code
