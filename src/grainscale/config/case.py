@@ -86,6 +86,35 @@ class DruckerPragerCfg(_Frictional):
     type: Literal["drucker_prager"]
 
 
+class MuICfg(_Elastic):
+    """mu(I) rheology (Jop et al. 2006); `density` is the bulk density of the flowing
+    material, E and nu those of the elastic predictor (mpm/materials/mu_i.py)."""
+
+    type: Literal["mu_i"]
+    mu_s: Pos  # -, friction coefficient of the onset of flow (I -> 0)
+    mu_2: Pos  # -, limit friction coefficient at large I, > mu_s
+    I_0: Pos  # -, inertial number where mu is halfway from mu_s to mu_2
+    grain_diameter: Pos  # m
+    grain_density: Pos  # kg/m^3, solid density of the grains, >= density
+
+    @field_validator("mu_2")
+    @classmethod
+    def _mu_2(cls, v, info):
+        mu_s = info.data.get("mu_s")
+        if mu_s is not None and not v > mu_s:
+            raise ValueError(f"must be > mu_s = {mu_s}")
+        return v
+
+    @field_validator("grain_density")
+    @classmethod
+    def _rho_s(cls, v, info):
+        rho = info.data.get("density")
+        if rho is not None and v < rho:
+            raise ValueError(f"must be >= density = {rho} (the bulk density, grains and "
+                             "voids)")
+        return v
+
+
 class DEMMaterialCfg(StrictModel):
     """The multiscale material: one periodic DEM RVE per point, from the case's [rve]."""
 
@@ -106,8 +135,8 @@ class DEMMaterialCfg(StrictModel):
     density: Pos | None = None  # kg/m^3; the packings' bulk density (set by the run)
 
 
-MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg | DEMMaterialCfg,
-                        Field(discriminator="type")]
+MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg | MuICfg
+                        | DEMMaterialCfg, Field(discriminator="type")]
 
 
 class _Body(StrictModel):

@@ -6,11 +6,13 @@ from grainscale.mpm.materials.base import Material
 from grainscale.mpm.materials.drucker_prager import DruckerPrager
 from grainscale.mpm.materials.elastic import LinearElastic
 from grainscale.mpm.materials.mohr_coulomb import MohrCoulomb
+from grainscale.mpm.materials.mu_i import MuI
 
 KINDS = {
     "linear_elastic": LinearElastic,
     "mohr_coulomb": MohrCoulomb,
     "drucker_prager": DruckerPrager,
+    "mu_i": MuI,
 }
 
-__all__ = ["KINDS", "DruckerPrager", "LinearElastic", "Material", "MohrCoulomb"]
+__all__ = ["KINDS", "DruckerPrager", "LinearElastic", "Material", "MohrCoulomb", "MuI"]
