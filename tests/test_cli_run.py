@@ -87,7 +87,7 @@ def test_run_writes_outputs(tmp_path):
     assert abs(float(last[4]) - 0.05 * (0.04 - 0.005)) < 1e-6
     assert float(last[5]) == float(last[3])  # downward motion: resistance = +f_z
     assert (out / "case.resolved.toml").read_text().count("grainscale_version") == 1
-    assert "flip = 0.99" in (out / "case.resolved.toml").read_text()  # defaults filled in
+    assert 'velocity_update = "apic"' in (out / "case.resolved.toml").read_text()  # defaults
     frames = sorted((out / "frames").glob("frame_*.vtu"))
     assert len(frames) >= 10 and "frame_00000.vtu" in (out / "frames.pvd").read_text()
     import meshio

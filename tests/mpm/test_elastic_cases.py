@@ -18,7 +18,7 @@ def test_axial_bar_first_mode_period(scheme):
     L, h, E, rho = 1.0, 1.0 / 30, 1e6, 1000.0
     grid = Grid.make([0, 0, 0], h, [30, 2, 2])
     s = elastic_box(grid, [0, 0, 0], [L, h, h], n=2, E=E, nu=0.0, rho=rho, cfl=0.3,
-                    scheme=scheme, flip=1.0)
+                    scheme=scheme, velocity_update="flip", flip=1.0)
     s.constraints = rollers(grid, ["y-", "y+", "z-", "z+"]) + [
         boundary.constraint(boundary.face_nodes(grid, "x-"), "fixed", None)]
     s.points.v[:, 0] = 0.01 * np.sin(np.pi * s.points.x[:, 0] / (2 * L))

@@ -64,7 +64,8 @@ def test_musl_drucker_prager_indentation_runs_and_yields():
     from grainscale.mpm.materials import DruckerPrager
 
     grid = Grid.make([0, 0, 0], 0.05, [8, 4, 6])
-    s = elastic_box(grid, [0, 0, 0], [0.4, 0.2, 0.2], n=2, scheme="MUSL", flip=0.9,
+    s = elastic_box(grid, [0, 0, 0], [0.4, 0.2, 0.2], n=2, scheme="MUSL",
+                    velocity_update="flip", flip=0.9,
                     gravity=np.array([0.0, 0.0, -9.81]))
     s.materials = [DruckerPrager("dp", s.points.n, density=1000.0, youngs_modulus=1e6,
                                  poisson_ratio=0.3, friction_angle=30.0)]

@@ -33,13 +33,28 @@ class GridCfg(StrictModel):
 class SolverCfg(StrictModel):
     scheme: Literal["USF", "USL", "MUSL"] = "USF"
     shape: Literal["GIMP", "linear"] = "GIMP"
-    flip: Annotated[float, Field(ge=0, le=1)] = 0.99  # FLIP fraction (0 = PIC)
+    # point velocity update: "apic" (affine PIC: no dissipation beyond the grid's) or
+    # "flip" (the FLIP/PIC blend of `flip`: its PIC share dissipates once per step, so
+    # by an amount that depends on dt)
+    velocity_update: Literal["apic", "flip"] = "apic"
+    flip: Annotated[float, Field(ge=0, le=1)] | None = None  # "flip" only; default 0.99
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
     dt: Pos | None = None  # s; fixed step (checked against the CFL limit); default: CFL
     gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
     threads: Annotated[int, Field(ge=0)] = 0  # per rank; 0: the cores / ranks per node
     partition_seed: Annotated[int, Field(ge=0)] = 0  # random point-to-rank assignment (MPI)
     rebalance_every: Annotated[int, Field(ge=0)] = 0  # steps between cost rebalancing; 0: never
+
+    @model_validator(mode="after")
+    def _flip(self):
+        if self.velocity_update == "flip" and self.flip is None:
+            self.flip = 0.99
+        elif self.velocity_update != "flip" and self.flip is not None:
+            raise ValueError(
+                f"flip = {self.flip} applies to velocity_update = 'flip' only, and "
+                f"velocity_update = {self.velocity_update!r} (the default is 'apic'); add "
+                "velocity_update = \"flip\" to keep the FLIP/PIC blend, or remove `flip`")
+        return self
 
 
 class TimeCfg(StrictModel):
@@ -174,17 +189,30 @@ class NodeBoxCfg(StrictModel):
 
 
 class BoundaryCfg(StrictModel):
-    type: Literal["fixed", "roller", "velocity"]
+    # fixed: no-slip; roller: normal velocity zero (bilateral unless separable);
+    # velocity: normal velocity prescribed; friction: one-sided Coulomb wall
+    type: Literal["fixed", "roller", "velocity", "friction"]
     face: Face | None = None  # a grid face ...
     box: NodeBoxCfg | None = None  # ... or the nodes inside a box
     normal: Axis | None = None  # roller in a box: the constrained component
     end_time: float | None = None  # s; removed at this time (default: never)
     velocity: float | None = None  # m/s; type "velocity": the normal component's value
+    friction: NonNeg | None = None  # type "friction": Coulomb coefficient mu of the wall
+    separable: bool = False  # roller: the material may leave the wall (one-sided)
 
     @model_validator(mode="after")
     def _where(self):
         if (self.face is None) == (self.box is None):
             raise ValueError("give exactly one of `face` or `box`")
+        if (self.type == "friction") != (self.friction is not None):
+            raise ValueError("`friction` (the wall's Coulomb coefficient) is given with, and "
+                             "only with, type = 'friction'")
+        if self.separable and self.type != "roller":
+            raise ValueError(f"separable = true applies to type = 'roller' (type = "
+                             f"{self.type!r}; a 'friction' wall is always one-sided)")
+        if (self.type == "friction" or self.separable) and self.face is None:
+            raise ValueError("a one-sided wall (type = 'friction', or a separable roller) "
+                             "needs `face`: the material lies on the grid's side of it")
         if self.type in ("roller", "velocity") and self.box is not None and self.normal is None:
             raise ValueError(f"a {self.type} on a box of nodes needs `normal` ('x', 'y' or 'z')")
         if (self.type == "velocity") != (self.velocity is not None):

@@ -5,6 +5,15 @@
   normal one zero, frictionless) or `velocity` (the normal one held at a given value,
   e.g. the displacement-controlled top of the unit element test). A constraint can end
   at a given time (it is removed for t >= end_time, as the column release of case 2).
+- Wall contact (one-sided, separable): the nodes of a grid face are a rigid wall the
+  material may leave but not enter, with Coulomb friction mu (mu = 0: a separable
+  roller). The standard contact-on-grid treatment (Bardenhagen et al. 2001; in granular
+  MPM e.g. Kumar 2015): with n the wall's normal pointing into the material, a node
+  moving into the wall (v.n < 0) loses its normal velocity, dv_n = -v.n, and its
+  tangential velocity is reduced by mu dv_n, to zero at most (stick); a node moving away
+  is left free. Applied to the nodal velocity before the stress update and to the
+  nodal momentum after the force integration, so the friction impulse per step is
+  mu times the normal impulse, as Coulomb's law asks.
 - Point tractions (Neumann): a traction vector t (Pa) on the material points selected by
   a box; each carries the force t * A_p with the tributary area A_p = V0_p^(2/3) (the
   face of its cubic sub-cell). The surface term of seed Eq. 6, int N_I t dS, is evaluated
@@ -41,6 +50,50 @@ class NodeConstraint:
 
     def active(self, time: float) -> bool:
         return time < self.end_time
+
+
+@dataclass
+class Wall:
+    """One-sided (separable) wall with Coulomb friction on the nodes of a grid face."""
+
+    nodes: np.ndarray  # (n,) int64 node ids
+    axis: int  # 0, 1 or 2: the wall's normal axis
+    inward: float  # +1 or -1: the sign of the normal pointing into the material
+    friction: float = 0.0  # Coulomb coefficient mu (0: frictionless, separable roller)
+    end_time: float = np.inf  # s; the wall acts while time < end_time
+
+    def active(self, time: float) -> bool:
+        return time < self.end_time
+
+
+def face_wall(grid: Grid, face: str, friction: float = 0.0, end_time: float = np.inf) -> Wall:
+    """A one-sided wall on a grid face ('z-' is a floor: the material lies above it)."""
+    axis, side = FACES[face]
+    return Wall(face_nodes(grid, face), axis, 1.0 if side == 0 else -1.0, friction, end_time)
+
+
+def apply_walls(walls: list[Wall], time: float, a: np.ndarray) -> None:
+    """Wall contact on a nodal velocity or momentum field a (n_nodes, 3), in place (both
+    scale with the same nodal mass, so the rule is the same): the approaching normal
+    component removed, the tangential one reduced by mu times it (Coulomb)."""
+    for wall in walls:
+        if not wall.active(time):
+            continue
+        rows = a[wall.nodes]
+        vn = wall.inward * rows[:, wall.axis]
+        hit = vn < 0.0  # moving into the wall
+        if not hit.any():
+            continue
+        r = rows[hit]
+        dvn = -vn[hit]  # normal velocity (momentum) removed, > 0
+        r[:, wall.axis] = 0.0
+        if wall.friction > 0.0:
+            vt = np.sqrt((r * r).sum(axis=1))  # the normal part is zero now
+            with np.errstate(divide="ignore", invalid="ignore"):
+                keep = np.where(vt > 0.0, np.maximum(0.0, 1.0 - wall.friction * dvn / vt), 0.0)
+            r *= keep[:, None]
+        rows[hit] = r
+        a[wall.nodes] = rows
 
 
 def face_nodes(grid: Grid, face: str) -> np.ndarray:

@@ -21,6 +21,7 @@ class Points:
     x: np.ndarray  # (P,3) m, position
     x0: np.ndarray  # (P,3) m, initial position (for the displacement field)
     v: np.ndarray  # (P,3) m/s, velocity
+    C: np.ndarray  # (P,3,3) 1/s, affine velocity of APIC, C[a, b] = d v_a / d x_b near x_p
     m: np.ndarray  # (P,) kg, mass (constant: seed Eq. 1 holds point by point)
     vol0: np.ndarray  # (P,) m^3, initial volume
     vol: np.ndarray  # (P,) m^3, current volume = det(F) vol0
@@ -47,7 +48,7 @@ def make_points(x: np.ndarray, vol: np.ndarray, density: float, mat: int,
         lp = 0.5 * np.cbrt(vol)
     return Points(
         x=x.copy(), x0=x.copy(),
-        v=np.tile(np.asarray(velocity, dtype=np.float64), (P, 1)),
+        v=np.tile(np.asarray(velocity, dtype=np.float64), (P, 1)), C=np.zeros((P, 3, 3)),
         m=density * vol, vol0=vol.copy(), vol=vol.copy(),
         F=np.tile(np.eye(3), (P, 1, 1)), stress=np.zeros((P, 3, 3)),
         lp=np.ascontiguousarray(np.broadcast_to(lp, (P,)), dtype=np.float64).copy(),

@@ -136,9 +136,12 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         mat_points.append(None if ids.size == pts.n else ids)
 
     t0 = case.time.start
-    constraints = []
+    constraints, walls = [], []
     for i, bc in enumerate(case.boundaries):
         end = np.inf if bc.end_time is None else bc.end_time
+        if bc.type == "friction" or bc.separable:
+            walls.append(boundary.face_wall(grid, bc.face, bc.friction or 0.0, end))
+            continue
         if bc.face is not None:
             nodes = boundary.face_nodes(grid, bc.face)
             normal = boundary.FACES[bc.face][0]
@@ -186,9 +189,10 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
     s = case.solver
     state = MPMState(
         grid=grid, points=pts, materials=materials, mat_points=mat_points,
-        constraints=constraints, tractions=tractions, rigid=rigid,
+        constraints=constraints, walls=walls, tractions=tractions, rigid=rigid,
         gravity=np.asarray(s.gravity, dtype=np.float64), scheme=s.scheme, shape=s.shape,
-        flip=s.flip, cfl=s.cfl, damping=case.damping.alpha,
+        velocity_update=s.velocity_update, flip=1.0 if s.flip is None else s.flip, cfl=s.cfl,
+        damping=case.damping.alpha,
         damping_end=np.inf if case.damping.end_time is None else case.damping.end_time,
         time=t0, step=0, n_threads=n_threads, comm=comm, n_traction_global=n_loaded)
     state.point_ids = point_ids

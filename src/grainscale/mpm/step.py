@@ -23,6 +23,7 @@ from grainscale.mpm.shape import GIMP, evaluate, stencil_width
 from grainscale.mpm.transfer import Transfer, g2p_kernel, velocity_gradient_kernel
 
 SCHEMES = ("USF", "USL", "MUSL")
+VELOCITY_UPDATES = ("apic", "flip")
 MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry no velocity
 
 
@@ -41,12 +42,14 @@ class MPMState:
     materials: list  # objects with the interface of materials.base.Material
     mat_points: list  # per material: (n,) int64 point ids, or None when it owns all points
     constraints: list = field(default_factory=list)  # boundary.NodeConstraint
+    walls: list = field(default_factory=list)  # boundary.Wall (one-sided, friction)
     tractions: list = field(default_factory=list)  # boundary.Traction
     rigid: RigidBody | None = None
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m/s^2
     scheme: str = "USF"
     shape: str = GIMP
-    flip: float = 1.0  # FLIP fraction of the velocity update (0 = PIC)
+    velocity_update: str = "apic"  # "apic", or "flip": the FLIP/PIC blend of `flip`
+    flip: float = 1.0  # FLIP fraction of the "flip" velocity update (0 = PIC)
     cfl: float = 0.5
     damping: float = 0.0  # local damping coefficient alpha
     damping_end: float = np.inf  # s, damping acts while time < damping_end
@@ -60,6 +63,9 @@ class MPMState:
     last_dt: float = 0.0  # s, the last step taken
 
     def __post_init__(self):
+        if self.velocity_update not in VELOCITY_UPDATES:
+            raise ValueError(f"velocity_update = {self.velocity_update!r}: valid "
+                             f"{VELOCITY_UPDATES}")
         P = self.points.n
         self.n_global = self.comm.total(P)  # points over all ranks
         self.ns = stencil_width(self.shape)
@@ -93,13 +99,22 @@ class MPMState:
 def shape_functions(s: MPMState) -> None:
     """S_Ip and grad S_Ip at the current point positions."""
     s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape, out=s.shape_buf)
+    if s.scheme == "MUSL" and s.velocity_update == "apic":
+        s.x_start = s.points.x.copy()  # the remap's affine term is taken where S_Ip was
+
+
+def impose(s: MPMState, a: np.ndarray, mass: np.ndarray | None = None) -> None:
+    """Dirichlet constraints, then wall contact, on a nodal velocity field a (or a
+    momentum field, given the nodal mass)."""
+    boundary.apply_constraints(s.constraints, s.time, a, mass)
+    boundary.apply_walls(s.walls, s.time, a)
 
 
 def p2g(s: MPMState) -> None:
     """Nodal mass and momentum, seed Eq. 16."""
     pts = s.points
-    s.mass, s.momentum, ok = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w,
-                                                      s.grid.nodes, s.ns)
+    s.mass, s.momentum, ok = s.transfer.mass_momentum(pts.m, pts.v, pts.C, pts.x, s.grid,
+                                                      s.base, s.w, s.ns)
     if not ok:
         raise SimulationError(f"step {s.step}: non-finite point velocity")
     s.active = s.mass > s.mass_tol
@@ -119,7 +134,7 @@ def grid_velocity(s: MPMState) -> None:
     v = np.zeros_like(s.momentum)
     a = s.active
     v[a] = s.momentum[a] / s.mass[a, None]
-    boundary.apply_constraints(s.constraints, s.time, v)
+    impose(s, v)
     if s.rigid is not None:
         v[s.rigid_nodes] = s.rigid_v
     s.v_old = v
@@ -174,7 +189,7 @@ def integrate_grid(s: MPMState, dt: float) -> None:
     if s.damping > 0.0 and s.time < s.damping_end:
         boundary.local_damping(f, s.v_old, s.damping)
     p = s.mass[:, None] * s.v_old + dt * f
-    boundary.apply_constraints(s.constraints, s.time, p, s.mass)
+    impose(s, p, s.mass)
     if s.rigid is not None:
         p[rn] = target
     v = np.zeros_like(p)
@@ -186,11 +201,12 @@ def integrate_grid(s: MPMState, dt: float) -> None:
 
 
 def g2p(s: MPMState, dt: float) -> None:
-    """Point velocity (FLIP/PIC, seed Eq. 18) and position (seed Eq. 19)."""
+    """Point velocity (APIC or FLIP/PIC, seed Eq. 18) and position (seed Eq. 19)."""
     pts = s.points
     g = s.grid
-    g2p_kernel(s.v_old, s.v_new, s.base, s.w, g.nodes, s.ns, dt, s.flip, g.origin, g.upper,
-               pts.x, pts.v, s.chunk_vmax, s.chunk_out)
+    g2p_kernel(s.v_old, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, s.flip,
+               s.velocity_update == "apic", g.origin, g.upper, pts.x, pts.v, pts.C,
+               s.chunk_vmax, s.chunk_out)
     # finiteness checked here, outside the fastmath kernel (its max drops a NaN); no NaN
     # enters a reduction, where MPI's MAX would give ranks different answers
     finite = bool(np.isfinite(pts.v).all() and np.isfinite(pts.x).all())
@@ -210,11 +226,12 @@ def g2p(s: MPMState, dt: float) -> None:
 def remap_velocity(s: MPMState) -> None:
     """MUSL: grid velocity re-mapped from the updated point momenta (same S_Ip)."""
     pts = s.points
-    _, mom, _ = s.transfer.mass_momentum(pts.m, pts.v, s.base, s.w, s.grid.nodes, s.ns)
+    x = s.x_start if s.velocity_update == "apic" else pts.x  # x unused when C = 0
+    _, mom, _ = s.transfer.mass_momentum(pts.m, pts.v, pts.C, x, s.grid, s.base, s.w, s.ns)
     v = np.zeros_like(mom)
     a = s.active
     v[a] = mom[a] / s.mass[a, None]
-    boundary.apply_constraints(s.constraints, s.time, v)
+    impose(s, v)
     if s.rigid is not None:
         v[s.rigid_nodes] = s.rigid_v
     s.v_new = v

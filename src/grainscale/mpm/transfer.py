@@ -38,20 +38,25 @@ def fixed_point_scale(bound: float) -> float:
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _p2g_mm_point(p, m, v, base, w, nx, ny, ns, mscale, pscale, b):
+def _p2g_mm_point(p, m, v, C, x, origin, h, base, w, nx, ny, ns, mscale, pscale, b):
     mp = m[p]
-    vx = v[p, 0]
-    vy = v[p, 1]
-    vz = v[p, 2]
     for k in range(ns):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
+        dz = origin[2] + iz * h[2] - x[p, 2]
         for j in range(ns):
-            row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
+            iy = base[p, 1] + j
+            row = nx * (iy + ny * iz) + base[p, 0]
             wyz = w[p, 1, j] * wz
+            dy = origin[1] + iy * h[1] - x[p, 1]
             for i in range(ns):
                 I = row + i
+                dx = origin[0] + (base[p, 0] + i) * h[0] - x[p, 0]
                 sm = w[p, 0, i] * wyz * mp
+                # APIC: the point's velocity field v_p + C_p (x_I - x_p) taken at the node
+                vx = v[p, 0] + C[p, 0, 0] * dx + C[p, 0, 1] * dy + C[p, 0, 2] * dz
+                vy = v[p, 1] + C[p, 1, 0] * dx + C[p, 1, 1] * dy + C[p, 1, 2] * dz
+                vz = v[p, 2] + C[p, 2, 0] * dx + C[p, 2, 1] * dy + C[p, 2, 2] * dz
                 b[I, 0] += np.int64(np.rint(sm * mscale))
                 b[I, 1] += np.int64(np.rint(sm * vx * pscale))
                 b[I, 2] += np.int64(np.rint(sm * vy * pscale))
@@ -59,18 +64,21 @@ def _p2g_mm_point(p, m, v, base, w, nx, ny, ns, mscale, pscale, b):
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _p2g_mm_task(t, nt, m, v, base, w, nodes, ns, mscale, pscale, buf):
+def _p2g_mm_task(t, nt, m, v, C, x, origin, h, base, w, nodes, ns, mscale, pscale, buf):
     P = m.shape[0]
     b = buf[t]
     b[:, :] = 0
     for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
         for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
-            _p2g_mm_point(p, m, v, base, w, nodes[0], nodes[1], ns, mscale, pscale, b)
+            _p2g_mm_point(p, m, v, C, x, origin, h, base, w, nodes[0], nodes[1], ns, mscale,
+                          pscale, b)
 
 
-def p2g_mass_momentum_kernel(m, v, base, w, nodes, ns, mscale, pscale, buf):
-    """Scatter S_Ip m_p and S_Ip m_p v_p into buf[t, I, 0:4] (fixed point), seed Eq. 16."""
-    parallel_for(_p2g_mm_task, m, v, base, w, nodes, ns, mscale, pscale, buf,
+def p2g_mass_momentum_kernel(m, v, C, x, origin, h, base, w, nodes, ns, mscale, pscale, buf):
+    """Scatter S_Ip m_p and S_Ip m_p (v_p + C_p (x_I - x_p)) into buf[t, I, 0:4] (fixed
+    point): seed Eq. 16, with the affine term of APIC (Jiang et al. 2015, Eq. 11); C = 0
+    is the FLIP/PIC transfer."""
+    parallel_for(_p2g_mm_task, m, v, C, x, origin, h, base, w, nodes, ns, mscale, pscale, buf,
                  nt=buf.shape[0])
 
 
@@ -225,29 +233,54 @@ def velocity_gradient_kernel(vgrid, base, w, dw, nodes, ns, dt, dH, F, vol0, vol
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _g2p_point(p, vold, vnew, base, w, nx, ny, ns, dt, flip, lo, hi, x, v):
+def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x, v, C):
     ax = ay = az = ux = uy = uz = 0.0
+    c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
     for k in range(ns):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
+        gz = dw[p, 2, k]
         for j in range(ns):
-            wyz = w[p, 1, j] * wz
+            wy = w[p, 1, j]
+            gy = dw[p, 1, j]
+            wyz = wy * wz
             row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
             for i in range(ns):
                 I = row + i
-                S = w[p, 0, i] * wyz
+                wx = w[p, 0, i]
+                S = wx * wyz
                 n0 = vnew[I, 0]
                 n1 = vnew[I, 1]
                 n2 = vnew[I, 2]
                 ux += S * n0
                 uy += S * n1
                 uz += S * n2
-                ax += S * (n0 - vold[I, 0])
-                ay += S * (n1 - vold[I, 1])
-                az += S * (n2 - vold[I, 2])
-    v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
-    v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
-    v2 = flip * (v[p, 2] + az) + (1.0 - flip) * uz
+                if apic:
+                    dx = dw[p, 0, i] * wyz
+                    dy = wx * gy * wz
+                    dz = wx * wy * gz
+                    c00 += n0 * dx
+                    c01 += n0 * dy
+                    c02 += n0 * dz
+                    c10 += n1 * dx
+                    c11 += n1 * dy
+                    c12 += n1 * dz
+                    c20 += n2 * dx
+                    c21 += n2 * dy
+                    c22 += n2 * dz
+                else:
+                    ax += S * (n0 - vold[I, 0])
+                    ay += S * (n1 - vold[I, 1])
+                    az += S * (n2 - vold[I, 2])
+    if apic:
+        v0, v1, v2 = ux, uy, uz
+        C[p, 0, 0], C[p, 0, 1], C[p, 0, 2] = c00, c01, c02
+        C[p, 1, 0], C[p, 1, 1], C[p, 1, 2] = c10, c11, c12
+        C[p, 2, 0], C[p, 2, 1], C[p, 2, 2] = c20, c21, c22
+    else:
+        v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
+        v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
+        v2 = flip * (v[p, 2] + az) + (1.0 - flip) * uz
     v[p, 0] = v0
     v[p, 1] = v1
     v[p, 2] = v2
@@ -263,15 +296,15 @@ def _g2p_point(p, vold, vnew, base, w, nx, ny, ns, dt, flip, lo, hi, x, v):
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _g2p_task(t, nt, vold, vnew, base, w, nodes, ns, dt, flip, lo, hi, x, v, vmax_out,
-              nout_out):
+def _g2p_task(t, nt, vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v, C,
+              vmax_out, nout_out):
     P = x.shape[0]
     for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
         vm = 0.0
         nout = 0
         for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
-            s2, out = _g2p_point(p, vold, vnew, base, w, nodes[0], nodes[1], ns, dt, flip, lo,
-                                 hi, x, v)
+            s2, out = _g2p_point(p, vold, vnew, base, w, dw, nodes[0], nodes[1], ns, dt, flip,
+                                 apic, lo, hi, x, v, C)
             vm = max(vm, s2)
             if out:
                 nout += 1
@@ -279,16 +312,21 @@ def _g2p_task(t, nt, vold, vnew, base, w, nodes, ns, dt, flip, lo, hi, x, v, vma
         nout_out[c] = nout
 
 
-def g2p_kernel(vold, vnew, base, w, nodes, ns, dt, flip, lo, hi, x, v, vmax_out, nout_out):
-    """Point velocity (FLIP/PIC blend, seed Eq. 18) and position (seed Eq. 19) update.
+def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v, C, vmax_out,
+               nout_out):
+    """Point velocity (seed Eq. 18) and position (seed Eq. 19) update.
 
-    v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
-    x_p <- x_p + dt sum S v_new
+    APIC (apic = True; Jiang et al. 2015, in the velocity-gradient form of Taylor PIC,
+    Nakamura et al. 2023, which is exactly APIC for linear shape functions):
+        v_p <- sum S v_new,   C_p <- sum v_new (x) grad S
+    FLIP/PIC blend (apic = False; C_p is left untouched, zero):
+        v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
+    Both: x_p <- x_p + dt sum S v_new.
     Per chunk: the largest point speed (for the CFL check) and the number of points
     whose centre left the grid box [lo, hi].
     """
-    parallel_for(_g2p_task, vold, vnew, base, w, nodes, ns, dt, flip, lo, hi, x, v, vmax_out,
-                 nout_out)
+    parallel_for(_g2p_task, vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
+                 C, vmax_out, nout_out)
 
 
 @njit(cache=True)
@@ -361,20 +399,28 @@ class Transfer:
         self.comm.sum_int(block)
         view[...] = block
 
-    def mass_momentum(self, m, v, base, w, nodes, ns):
-        """Nodal mass (n_nodes,) and momentum (n_nodes,3) from the points (seed Eq. 16),
-        and ok: False on every rank if any rank holds a non-finite velocity."""
+    def mass_momentum(self, m, v, C, x, grid, base, w, ns):
+        """Nodal mass (n_nodes,) and momentum (n_nodes,3) from the points (seed Eq. 16,
+        with the APIC affine velocity C of each point at x), and ok: False on every rank
+        if any rank holds a non-finite velocity."""
         P = m.shape[0]
-        bad = not np.isfinite(v).all()  # outside the fastmath kernels, and no NaN reduced
-        local = [float(m.max()) if P else 0.0,
-                 float(np.abs(v).max()) if P and not bad else 0.0, 1.0 if bad else 0.0]
+        # outside the fastmath kernels, and no NaN reduced
+        bad = not (np.isfinite(v).all() and np.isfinite(C).all())
+        # |v_p + C_p (x_I - x_p)| <= |v|max + max_a sum_b |C_ab| * 2 h: a stencil node lies
+        # within 2 cells of its point
+        reach = 2.0 * float(grid.cell_size.max())
+        vbound = (float(np.abs(v).max()) + reach * float(np.abs(C).sum(axis=2).max())
+                  if P and not bad else 0.0)
+        local = [float(m.max()) if P else 0.0, vbound, 1.0 if bad else 0.0]
         g = self.comm.max([*local, *stencil_box(base, ns)])
         if g[2] > 0.0:
             return None, None, False
         mscale = fixed_point_scale(self.n_global * g[0])
         pscale = fixed_point_scale(self.n_global * g[0] * g[1])
+        nodes = grid.nodes
         if P:
-            p2g_mass_momentum_kernel(m, v, base, w, nodes, ns, mscale, pscale, self.buf4)
+            p2g_mass_momentum_kernel(m, v, C, x, grid.origin, grid.cell_size, base, w, nodes,
+                                     ns, mscale, pscale, self.buf4)
             np.sum(self.buf4, axis=0, out=self.sum4)  # exact: integers
         else:
             self.sum4[:] = 0
