@@ -135,3 +135,21 @@ def test_case_file_builds_walls(tmp_path):
     s = build_state(load_toml(p, Case))
     assert [(w.axis, w.inward, w.friction) for w in s.walls] == [(2, 1.0, 0.4), (0, 1.0, 0.0)]
     assert not s.constraints
+
+
+def test_points_that_crossed_a_wall_are_put_back_on_it():
+    """The points' side of the contact: a point centre past a one-sided wall's plane
+    (possible for a point at zero stress, carried by node velocities alone) returns to
+    the plane and keeps only a velocity away from the wall; other points are untouched;
+    a wall that has ended does nothing."""
+    grid = Grid.make([0, 0, 0], 0.1, [4, 4, 4])
+    x = np.array([[0.2, 0.2, -0.01], [0.2, 0.2, 0.05], [0.2, 0.2, -0.02], [0.2, 0.2, 0.41]])
+    v = np.array([[1.0, 0.0, -2.0], [1.0, 0.0, -2.0], [0.0, 0.0, 3.0], [0.0, 0.0, 1.0]])
+    walls = [boundary.face_wall(grid, "z-", 0.3), boundary.face_wall(grid, "z+", 0.0, 1.0)]
+    boundary.keep_behind_walls(walls, 0.0, grid, x, v)
+    np.testing.assert_array_equal(x[:, 2], [0.0, 0.05, 0.0, 0.4])
+    np.testing.assert_array_equal(v[:, 2], [0.0, -2.0, 3.0, 0.0])
+    np.testing.assert_array_equal(v[:, 0], [1.0, 1.0, 0.0, 0.0])
+    x[3, 2] = 0.45
+    boundary.keep_behind_walls(walls, 2.0, grid, x, v)  # the z+ wall ended at t = 1
+    assert x[3, 2] == 0.45

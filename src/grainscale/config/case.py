@@ -28,6 +28,7 @@ class GridCfg(StrictModel):
     cell_size: Pos | tuple[Pos, Pos, Pos]  # m, one value (cubic cells) or one per axis
     cells: tuple[Annotated[int, Field(ge=1)], Annotated[int, Field(ge=1)],
                  Annotated[int, Field(ge=1)]]  # cells per axis
+    periodic: list[Axis] = []  # axes along which material leaving one end re-enters
 
 
 class SolverCfg(StrictModel):
@@ -49,7 +50,7 @@ class SolverCfg(StrictModel):
     def _flip(self):
         if self.velocity_update == "flip" and self.flip is None:
             self.flip = 0.99
-        elif self.velocity_update != "flip" and self.flip is not None:
+        elif self.velocity_update == "apic" and self.flip is not None:
             raise ValueError(
                 f"flip = {self.flip} applies to velocity_update = 'flip' only, and "
                 f"velocity_update = {self.velocity_update!r} (the default is 'apic'); add "
@@ -327,6 +328,11 @@ def check_case(case: Case) -> None:
     if case.solver.shape == "GIMP" and min(case.grid.cells) < 2:
         raise ConfigError(f"grid.cells = {list(case.grid.cells)}: GIMP needs >= 2 cells "
                           "per axis (or use solver.shape = 'linear')")
+    for i, bc in enumerate(case.boundaries):
+        if bc.face is not None and bc.face[0] in case.grid.periodic:
+            raise ConfigError(f"boundaries[{i}].face = {bc.face!r}: grid.periodic = "
+                              f"{case.grid.periodic} has no {bc.face[0]} faces; valid faces: "
+                              "those of the other axes")
     valid = list(HISTORY_ALWAYS)
     if case.output.column is not None:
         valid += HISTORY_COLUMN

@@ -96,6 +96,24 @@ def apply_walls(walls: list[Wall], time: float, a: np.ndarray) -> None:
         a[wall.nodes] = rows
 
 
+def keep_behind_walls(walls: list[Wall], time: float, grid: Grid, x: np.ndarray,
+                      v: np.ndarray) -> None:
+    """The points' side of the wall contact, in place: a point centre that crossed a wall
+    plane (a point at zero stress, separated from its neighbours, is carried by the
+    node velocities only and nothing stops it) is put back on the plane and loses its
+    velocity into the wall."""
+    for wall in walls:
+        if not wall.active(time):
+            continue
+        a = wall.axis
+        plane = grid.origin[a] if wall.inward > 0 else grid.upper[a]
+        crossed = wall.inward * (x[:, a] - plane) < 0.0
+        if crossed.any():
+            x[crossed, a] = plane
+            vn = wall.inward * v[crossed, a]
+            v[crossed, a] = np.where(vn < 0.0, 0.0, v[crossed, a])
+
+
 def face_nodes(grid: Grid, face: str) -> np.ndarray:
     """Node ids of one face of the grid ('x-', 'x+', ...)."""
     axis, side = FACES[face]

@@ -3,6 +3,13 @@
 Nodes are numbered `I = i + nx * (j + ny * k)` with `nx, ny, nz = cells + 1`; node
 (i, j, k) sits at `origin + (i, j, k) * cell_size`. The grid never moves (the "scratch
 pad" of seed §2.1); nodal arrays are rebuilt every step.
+
+Periodic axes: the material lives in [o, o + N h) along such an axis (o, N the case's
+origin and cells) and leaves through one end to re-enter at the other. The grid held here
+is that period padded by PAD cells at each end, so every stencil lies inside it and the
+kernels see an ordinary grid; `fold` sums each nodal value with its periodic images and
+hands the sum back to all of them (after P2G), `wrap` brings positions back into the
+period (after G2P).
 """
 
 from __future__ import annotations
@@ -11,22 +18,61 @@ from dataclasses import dataclass
 
 import numpy as np
 
+PAD = 2  # cells added at each end of a periodic axis (a GIMP stencil reaches 1.25 h)
+
 
 @dataclass(frozen=True)
 class Grid:
     origin: np.ndarray  # (3,) m, position of node (0, 0, 0)
     cell_size: np.ndarray  # (3,) m, edge lengths of one cell
     cells: np.ndarray  # (3,) int64, number of cells per axis
+    period: np.ndarray = None  # (3,) int64 cells of a periodic axis' period, 0 otherwise
 
     @classmethod
-    def make(cls, origin, cell_size, cells) -> Grid:
+    def make(cls, origin, cell_size, cells, periodic=(False, False, False)) -> Grid:
+        """The grid of `cells` from `origin`; periodic axes get PAD cells of padding."""
         h = np.broadcast_to(np.asarray(cell_size, dtype=np.float64), (3,)).copy()
         n = np.asarray(cells, dtype=np.int64).reshape(3).copy()
         if np.any(h <= 0):
             raise ValueError(f"cell size must be > 0, got {h.tolist()}")
         if np.any(n < 1):
             raise ValueError(f"cell counts must be >= 1, got {n.tolist()}")
-        return cls(np.asarray(origin, dtype=np.float64).reshape(3).copy(), h, n)
+        per = np.asarray(periodic, dtype=bool).reshape(3)
+        o = np.asarray(origin, dtype=np.float64).reshape(3).copy()
+        period = np.where(per, n, 0).astype(np.int64)
+        return cls(o - PAD * h * per, h, n + 2 * PAD * per, period)
+
+    @property
+    def periodic(self) -> np.ndarray:
+        """(3,) bool: the periodic axes."""
+        return np.zeros(3, dtype=bool) if self.period is None else self.period > 0
+
+    def period_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the region the material may occupy: the period along periodic
+        axes, the whole grid along the others."""
+        lo, hi = self.origin.copy(), self.upper.copy()
+        per = self.periodic
+        lo[per] += PAD * self.cell_size[per]
+        hi[per] = lo[per] + self.period[per] * self.cell_size[per]
+        return lo, hi
+
+    def wrap(self, x: np.ndarray) -> None:
+        """Positions (P,3) brought back into the period along periodic axes, in place."""
+        lo, hi = self.period_box()
+        for a in np.flatnonzero(self.periodic):
+            x[:, a] = lo[a] + np.mod(x[:, a] - lo[a], hi[a] - lo[a])
+
+    def fold(self, a: np.ndarray) -> None:
+        """Nodal array a (n_nodes, c) made periodic in place: every node gets the sum over
+        itself and its periodic images (exact for the integer sums of the transfers)."""
+        view = a.reshape(*self.nodes[::-1], a.shape[1])  # [k, j, i, c]
+        for ax in np.flatnonzero(self.periodic):
+            v = np.moveaxis(view, 2 - ax, 0)  # the periodic axis first
+            N = int(self.period[ax])
+            image = (np.arange(v.shape[0]) - PAD) % N
+            total = np.zeros((N, *v.shape[1:]), dtype=a.dtype)
+            np.add.at(total, image, v)
+            v[...] = total[image]
 
     @property
     def nodes(self) -> np.ndarray:

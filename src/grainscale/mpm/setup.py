@@ -36,10 +36,11 @@ def _check_extent(grid: Grid, lo, hi, key: str) -> None:
     """A filled shape must lie inside the grid (filling never silently clips it)."""
     lo, hi = np.asarray(lo), np.asarray(hi)
     tol = 1e-9 * grid.cell_size
-    if np.any(lo < grid.origin - tol) or np.any(hi > grid.upper + tol):
+    glo, ghi = grid.period_box()
+    if np.any(lo < glo - tol) or np.any(hi > ghi + tol):
         raise ConfigError(
             f"{key}: extends from {lo.tolist()} to {hi.tolist()}, outside the grid; valid "
-            f"range {grid.origin.tolist()} .. {grid.upper.tolist()} "
+            f"range {glo.tolist()} .. {ghi.tolist()} "
             "(grid.origin .. grid.origin + grid.cells * grid.cell_size); set "
             "clip_to_grid = true to keep only the part inside (symmetry planes)")
 
@@ -76,7 +77,8 @@ def _body_points(grid: Grid, body, i: int, case_dir: Path):
 
 def build_grid(case: Case) -> Grid:
     g = case.grid
-    return Grid.make(g.origin, g.cell_size, g.cells)
+    return Grid.make(g.origin, g.cell_size, g.cells,
+                     periodic=[a in g.periodic for a in ("x", "y", "z")])
 
 
 def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
@@ -97,13 +99,15 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
     grid = build_grid(case)
     names = list(case.materials)
     sets = []
-    lo, hi = grid.origin, grid.upper
+    lo, hi = grid.period_box()
+    per = grid.periodic
     for i, body in enumerate(case.bodies):
         x, vol = _body_points(grid, body, i, case_dir)
         if x.shape[0] == 0:
             raise ConfigError(f"bodies[{i}]: the {body.shape} contains no material point "
                               "(is it inside the grid, larger than a sub-cell?)")
-        out = ~np.all((x >= lo) & (x <= hi), axis=1)
+        # a periodic axis holds [lo, hi): hi is lo's image
+        out = ~np.all((x >= lo) & ((x <= hi) & ~per | (x < hi) & per), axis=1)
         if out.any():
             raise ConfigError(
                 f"bodies[{i}]: {int(out.sum())} material point(s) outside the grid, e.g. at "
@@ -191,7 +195,7 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         grid=grid, points=pts, materials=materials, mat_points=mat_points,
         constraints=constraints, walls=walls, tractions=tractions, rigid=rigid,
         gravity=np.asarray(s.gravity, dtype=np.float64), scheme=s.scheme, shape=s.shape,
-        velocity_update=s.velocity_update, flip=1.0 if s.flip is None else s.flip, cfl=s.cfl,
+        velocity_update=s.velocity_update, flip=0.0 if s.flip is None else s.flip, cfl=s.cfl,
         damping=case.damping.alpha,
         damping_end=np.inf if case.damping.end_time is None else case.damping.end_time,
         time=t0, step=0, n_threads=n_threads, comm=comm, n_traction_global=n_loaded)

@@ -69,7 +69,8 @@ class MPMState:
         P = self.points.n
         self.n_global = self.comm.total(P)  # points over all ranks
         self.ns = stencil_width(self.shape)
-        self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads, self.comm, self.n_global)
+        self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads, self.comm, self.n_global,
+                                 fold=self.grid.fold if self.grid.periodic.any() else None)
         self.dH = np.zeros((P, 3, 3))
         self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
                           np.zeros((P, 3, 3)))
@@ -204,21 +205,31 @@ def g2p(s: MPMState, dt: float) -> None:
     """Point velocity (APIC or FLIP/PIC, seed Eq. 18) and position (seed Eq. 19)."""
     pts = s.points
     g = s.grid
-    g2p_kernel(s.v_old, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, s.flip,
+    flip = 0.0 if s.velocity_update == "apic" else s.flip
+    g2p_kernel(s.v_old, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
                s.velocity_update == "apic", g.origin, g.upper, pts.x, pts.v, pts.C,
                s.chunk_vmax, s.chunk_out)
+    n_out = int(s.chunk_out.sum())
+    if g.periodic.any():
+        g.wrap(pts.x)
+    if s.walls:
+        boundary.keep_behind_walls(s.walls, s.time, g, pts.x, pts.v)
+        n_out = int(np.count_nonzero(~g.contains(pts.x)))
     # finiteness checked here, outside the fastmath kernel (its max drops a NaN); no NaN
     # enters a reduction, where MPI's MAX would give ranks different answers
     finite = bool(np.isfinite(pts.v).all() and np.isfinite(pts.x).all())
     vmax = float(s.chunk_vmax.max()) if pts.n and finite else 0.0
-    g = s.comm.max([vmax if finite else np.inf, float(s.chunk_out.sum())])
-    s.vmax = float(g[0])
-    n_out = int(s.chunk_out.sum())  # reported by the ranks that own them
-    if g[1] > 0 and not n_out:
+    g_max = s.comm.max([vmax if finite else np.inf, float(n_out)])
+    s.vmax = float(g_max[0])
+    if g_max[1] > 0 and not n_out:  # reported by the ranks that own them
         raise RemoteFailure(f"step {s.step}: material points of another rank left the grid")
     if n_out:
-        raise SimulationError(f"step {s.step}: {n_out} material point(s) left the grid; "
-                              "enlarge [grid] or constrain the boundary")
+        out = np.flatnonzero(~g.contains(pts.x))
+        ids = getattr(s, "point_ids", np.arange(pts.n))
+        raise SimulationError(
+            f"step {s.step}: {n_out} material point(s) left the grid, e.g. point "
+            f"{int(ids[out[0]])} at {pts.x[out[0]].tolist()} (grid {g.origin.tolist()} .. "
+            f"{g.upper.tolist()}); enlarge [grid] or constrain the boundary")
     if not np.isfinite(s.vmax):
         raise SimulationError(f"step {s.step}: non-finite point velocity (time step too large?)")
 

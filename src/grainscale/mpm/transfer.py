@@ -268,19 +268,17 @@ def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x
                     c20 += n2 * dx
                     c21 += n2 * dy
                     c22 += n2 * dz
-                else:
+                if flip > 0.0:
                     ax += S * (n0 - vold[I, 0])
                     ay += S * (n1 - vold[I, 1])
                     az += S * (n2 - vold[I, 2])
     if apic:
-        v0, v1, v2 = ux, uy, uz
         C[p, 0, 0], C[p, 0, 1], C[p, 0, 2] = c00, c01, c02
         C[p, 1, 0], C[p, 1, 1], C[p, 1, 2] = c10, c11, c12
         C[p, 2, 0], C[p, 2, 1], C[p, 2, 2] = c20, c21, c22
-    else:
-        v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
-        v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
-        v2 = flip * (v[p, 2] + az) + (1.0 - flip) * uz
+    v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
+    v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
+    v2 = flip * (v[p, 2] + az) + (1.0 - flip) * uz
     v[p, 0] = v0
     v[p, 1] = v1
     v[p, 2] = v2
@@ -316,11 +314,11 @@ def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
                nout_out):
     """Point velocity (seed Eq. 18) and position (seed Eq. 19) update.
 
-    APIC (apic = True; Jiang et al. 2015, in the velocity-gradient form of Taylor PIC,
-    Nakamura et al. 2023, which is exactly APIC for linear shape functions):
-        v_p <- sum S v_new,   C_p <- sum v_new (x) grad S
-    FLIP/PIC blend (apic = False; C_p is left untouched, zero):
-        v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
+    v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
+    (FLIP/PIC blend, seed Eq. 18; flip = 0 is PIC) and, with apic = True, the affine
+    velocity C_p <- sum v_new (x) grad S. APIC (Jiang et al. 2015) is apic with flip = 0,
+    in the velocity-gradient form of Taylor PIC (Nakamura et al. 2023), exactly APIC for
+    linear shape functions. With apic = False C_p is left untouched (zero).
     Both: x_p <- x_p + dt sum S v_new.
     Per chunk: the largest point speed (for the CFL check) and the number of points
     whose centre left the grid box [lo, hi].
@@ -377,9 +375,10 @@ class Transfer:
     """
 
     def __init__(self, n_nodes: int, n_points: int, n_threads: int, comm=None,
-                 n_global: int | None = None):
+                 n_global: int | None = None, fold=None):
         from grainscale.distributed.comm import Comm
 
+        self.fold = fold  # sums periodic images of the integer nodal sums (Grid.fold)
         self.n_threads = n_threads
         self.comm = comm if comm is not None else Comm()
         self.n_global = n_points if n_global is None else n_global
@@ -425,6 +424,8 @@ class Transfer:
         else:
             self.sum4[:] = 0
         self._reduce(self.sum4, nodes, g[3:])
+        if self.fold is not None:
+            self.fold(self.sum4)
         mass = self.sum4[:, 0] * (1.0 / mscale)
         mom = self.sum4[:, 1:4] * (1.0 / pscale)
         return mass, mom, True
@@ -464,4 +465,6 @@ class Transfer:
         if extra is not None and len(extra[0]):
             np.add.at(self.sum3, extra[0], np.rint(extra[1] * fscale).astype(np.int64))
         self._reduce(self.sum3, nodes, g[2:])
+        if self.fold is not None:
+            self.fold(self.sum3)
         return self.sum3 * (1.0 / fscale), True
