@@ -34,9 +34,8 @@ class GridCfg(StrictModel):
 class SolverCfg(StrictModel):
     scheme: Literal["USF", "USL", "MUSL"] = "USF"
     shape: Literal["GIMP", "linear"] = "GIMP"
-    # point velocity update: "apic" (affine PIC: no dissipation beyond the grid's) or
-    # "flip" (the FLIP/PIC blend of `flip`: its PIC share dissipates once per step, so
-    # by an amount that depends on dt)
+    # point velocity update: "apic" (affine PIC) or "flip" (the FLIP/PIC blend of `flip`,
+    # whose PIC share dissipates once per step, so by an amount that depends on dt)
     velocity_update: Literal["apic", "flip"] = "apic"
     flip: Annotated[float, Field(ge=0, le=1)] | None = None  # "flip" only; default 0.99
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5

@@ -1,0 +1,171 @@
+"""Grid convergence of the continuum column collapse (mu(I) and Mohr-Coulomb).
+
+    python examples/column_collapse/convergence.py --out DIR [--cells 10 5 2.5 1.25]
+        [--materials mu_i mohr_coulomb] [--friction-angle 22]
+
+Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
+a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
+density and elastic moduli), to 7 tau_c. The slice stays one cell thick. A run whose
+history already reaches the end is not repeated, so the study can be extended or
+resumed. Writes DIR/results.json, DIR/convergence.png (runout against t / tau_c for every
+run beside Lube et al. 2005, 1.2 a, and Lajeunesse et al. 2005, 1.8 a; final runout
+against cell size) and prints a table; the last line is one JSON object.
+
+Front-stop time: the first t / tau_c at which the front is within 0.01 L_i of its final
+position.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import tomllib
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import tomli_w  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+ASPECT = 0.6
+X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
+
+
+def case_at(h: float, material: str, friction_angle: float) -> dict:
+    """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
+    twin."""
+    case = tomllib.loads((HERE / "mu_i.toml").read_text())
+    case["grid"]["cell_size"] = h
+    case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
+    case["bodies"][0]["hi"][1] = h
+    for bc in case["boundaries"]:
+        if "box" in bc:
+            bc["box"]["hi"][1] = h
+            if bc.get("normal") == "y":
+                bc["box"]["lo"][1] = h
+    if material == "mohr_coulomb":
+        mu = case["materials"]["beads"]
+        case["materials"]["beads"] = {
+            "type": "mohr_coulomb", "density": mu["density"],
+            "youngs_modulus": mu["youngs_modulus"], "poisson_ratio": mu["poisson_ratio"],
+            "friction_angle": friction_angle, "dilation_angle": 0.0}
+    case["title"] = f"column collapse, {material}, {h * 1e3:g} mm cells"
+    return case
+
+
+def read_history(path: Path) -> dict[str, np.ndarray]:
+    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+    names = lines[0].split(",")
+    data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    return {n: data[:, i] for i, n in enumerate(names)}
+
+
+def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
+    after = h["t_over_tc"] >= 0
+    t, r = h["t_over_tc"][after], h["runout_ratio"][after]
+    final = float(r[-1])
+    stop = float(t[np.argmax(r >= final - 0.01)])
+    ke = h["kinetic_energy"][after]
+    return {"runout": final, "height_ratio": float(h["height_ratio"][after][-1]),
+            "front_stop_t_over_tc": stop, "t_over_tc_end": float(t[-1]),
+            "kinetic_energy_end_over_peak": float(ke[-1] / ke.max()) if ke.max() > 0 else 0.0}
+
+
+def run_one(case: dict, out: Path) -> float:
+    """Run the case into out/run unless it is complete there; wall seconds spent."""
+    from grainscale.cli import main as grainscale
+
+    out.mkdir(parents=True, exist_ok=True)
+    hist = out / "run" / "history.csv"
+    if hist.is_file():
+        h = read_history(hist)
+        if h["time"][-1] >= case["time"]["end"] - 1e-9:
+            return float(json.loads((out / "wall.json").read_text())["wall_s"])
+    (out / "case.toml").write_text(tomli_w.dumps(case))
+    t0 = time.perf_counter()
+    code = grainscale(["run", str(out / "case.toml"), "--out", str(out / "run"), "--quiet"])
+    if code:
+        raise SystemExit(f"{out}: grainscale run exited with {code}")
+    wall = time.perf_counter() - t0
+    (out / "wall.json").write_text(json.dumps({"wall_s": wall}))
+    return wall
+
+
+def plot(results: list[dict], histories: dict, png: Path) -> None:
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
+    styles = {"mu_i": "-", "mohr_coulomb": "--"}
+    sizes = sorted({r["cell_mm"] for r in results}, reverse=True)
+    colours = dict(zip(sizes, plt.cm.viridis(np.linspace(0.0, 0.85, len(sizes))), strict=True))
+    for r in results:
+        h = histories[(r["material"], r["cell_mm"])]
+        after = h["t_over_tc"] >= 0
+        ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], styles[r["material"]],
+                color=colours[r["cell_mm"]], label=f"{r['label']}, {r['cell_mm']:g} mm")
+    for b in (ax, bx):
+        b.axhline(1.2 * ASPECT, color="tab:blue", ls=":", lw=1,
+                  label=f"Lube et al. 2005: 1.2a = {1.2 * ASPECT:.2f}")
+        b.axhline(1.8 * ASPECT, color="tab:red", ls=":", lw=1,
+                  label=f"Lajeunesse et al. 2005: 1.8a = {1.8 * ASPECT:.2f}")
+    ax.set_xlabel("t / tau_c")
+    ax.set_ylabel("(L - L_i) / L_i")
+    ax.set_xlim(0, 7)
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=7, loc="lower right")
+    for mat in dict.fromkeys(r["material"] for r in results):
+        rows = sorted((r for r in results if r["material"] == mat), key=lambda r: r["cell_mm"])
+        bx.plot([r["cell_mm"] for r in rows], [r["runout"] for r in rows],
+                styles[mat] + "o", color="k", label=rows[0]["label"])
+    bx.set_xscale("log")
+    bx.set_xlabel("cell size (mm)")
+    bx.set_ylabel("final runout at 7 tau_c")
+    bx.set_ylim(bottom=0)
+    bx.legend(fontsize=7)
+    fig.suptitle(f"column collapse a = {ASPECT}: grid convergence")
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--cells", type=float, nargs="+", default=[10.0, 5.0, 2.5, 1.25],
+                    help="cell sizes in mm")
+    ap.add_argument("--materials", nargs="+", default=["mu_i", "mohr_coulomb"],
+                    choices=["mu_i", "mohr_coulomb"])
+    ap.add_argument("--friction-angle", type=float, default=22.0,
+                    help="Mohr-Coulomb friction angle (deg)")
+    args = ap.parse_args()
+    results, histories = [], {}
+    for mat in args.materials:
+        label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
+        for mm in sorted(args.cells, reverse=True):
+            out = args.out / f"{mat}_{mm:g}mm"
+            wall = run_one(case_at(mm * 1e-3, mat, args.friction_angle), out)
+            h = read_history(out / "run" / "history.csv")
+            histories[(mat, mm)] = h
+            row = {"material": mat, "label": label, "cell_mm": mm, "wall_s": round(wall, 1),
+                   **measures(h)}
+            results.append(row)
+            print(f"{label:24s} {mm:5g} mm: runout {row['runout']:.3f}, H_f/H_i "
+                  f"{row['height_ratio']:.3f}, front stops at {row['front_stop_t_over_tc']:.2f} "
+                  f"tau_c, KE end/peak {row['kinetic_energy_end_over_peak']:.3f}, "
+                  f"{wall:.0f} s", flush=True)
+    (args.out / "results.json").write_text(json.dumps(results, indent=1))
+    plot(results, histories, args.out / "convergence.png")
+    summary = {}
+    for mat in args.materials:
+        rows = sorted((r for r in results if r["material"] == mat), key=lambda r: r["cell_mm"])
+        summary[f"{mat}_runout"] = {f"{r['cell_mm']:g}mm": round(r["runout"], 4) for r in rows}
+        if len(rows) >= 2:
+            summary[f"{mat}_finest_change"] = round(abs(rows[0]["runout"] / rows[1]["runout"]
+                                                        - 1.0), 4)
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,48 @@
+"""A continuum column collapse should not depend on the time step (the flow-numerics
+issue: with a FLIP/PIC blend it did, by a factor 2-3, through its per-step PIC share)."""
+
+import importlib.util
+import tomllib
+from pathlib import Path
+
+import pytest
+import tomli_w
+
+from grainscale.cli import main
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"
+
+
+def _convergence():
+    spec = importlib.util.spec_from_file_location("convergence", EXAMPLE / "convergence.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _runout(tmp_path, cfl):
+    conv = _convergence()
+    case = conv.case_at(0.005, "mu_i", 22.0)  # mu_i.toml at 5 mm cells: 20-40 s a run
+    case["solver"]["cfl"] = cfl
+    path = tmp_path / f"case_{cfl}.toml"
+    path.write_text(tomli_w.dumps(case))
+    out = tmp_path / f"out_{cfl}"
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
+    return conv.measures(conv.read_history(out / "history.csv"))
+
+
+def test_halving_dt_moves_the_apic_runout_little(tmp_path):
+    """mu(I) column of mu_i.toml at 5 mm cells to 7 tau_c with cfl 0.5 and 0.25 (dt
+    halved). APIC still dissipates once per step where the velocity field varies within
+    a stencil (the front, the free surface, the base), so the runout is not exactly dt
+    independent: measured 1.016 and 1.002 (1.4 %; at 10 mm cells 11 %, at 2.5 mm 3.7 %,
+    docs/validation.md §2), against the factor 2-3 of FLIP 0.98. The issue's 1 % is not
+    met; 2 % guards the measured figure. Both runs must have come to rest (front
+    stopped before 5 tau_c) in the flow regime (runout > 0.8)."""
+    coarse = _runout(tmp_path, 0.5)
+    fine = _runout(tmp_path, 0.25)
+    for r in (coarse, fine):
+        assert r["runout"] > 0.8 and r["front_stop_t_over_tc"] < 5.0
+    assert fine["runout"] == pytest.approx(coarse["runout"], rel=0.02)
+    with open(EXAMPLE / "mu_i.toml", "rb") as f:
+        assert tomllib.load(f)["solver"]["velocity_update"] == "apic"
