@@ -1,5 +1,6 @@
-"""Small builders shared by the MPM tests (no case file needed)."""
+"""Small builders shared by the MPM tests."""
 
+from pathlib import Path
 
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
@@ -21,6 +22,37 @@ def rollers(grid: Grid, faces) -> list:
         axis = boundary.FACES[f][0]
         out.append(boundary.constraint(boundary.face_nodes(grid, f), "roller", axis))
     return out
+
+
+def small_case(tmp_path, *, grid="cells = [2, 2, 2]", solver="", hi="[0.1, 0.1, 0.1]",
+               extra="") -> Path:
+    """A minimal elastic case file (0.1 m cells, one box body from the origin to `hi`)
+    written to tmp_path/case.toml, with lines added to [grid] and [solver] and tables
+    appended (`extra`)."""
+    p = tmp_path / "case.toml"
+    p.write_text(f"""
+[grid]
+cell_size = 0.1
+{grid}
+[solver]
+{solver}
+[time]
+end = 1.0
+[materials.m]
+type = "linear_elastic"
+density = 1000.0
+youngs_modulus = 1e6
+poisson_ratio = 0.3
+[[bodies]]
+shape = "box"
+material = "m"
+lo = [0, 0, 0]
+hi = {hi}
+[output]
+interval = 0.1
+{extra}
+""")
+    return p
 
 
 def run(s: MPMState, t_end: float, record=None):

@@ -3,7 +3,7 @@ and material leaving one end re-enters at the other."""
 
 import numpy as np
 import pytest
-from mpmutil import elastic_box
+from mpmutil import elastic_box, small_case
 
 from grainscale.config.base import ConfigError
 from grainscale.mpm.grid import PAD, Grid
@@ -54,33 +54,14 @@ def test_periodic_keys(tmp_path):
     from grainscale.config.case import load_case
     from grainscale.mpm.setup import build_state
 
-    case = """
-[grid]
-cell_size = 0.1
-cells = [4, 2, 2]
-periodic = ["x"]
-[time]
-end = 1.0
-[materials.m]
-type = "linear_elastic"
-density = 1000.0
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-[[bodies]]
-shape = "box"
-material = "m"
-lo = [0, 0, 0]
-hi = [0.4, 0.1, 0.1]
-[output]
-interval = 0.1
-"""
-    p = tmp_path / "case.toml"
-    p.write_text(case)
+    grid = 'cells = [4, 2, 2]\nperiodic = ["x"]'
+    p = small_case(tmp_path, grid=grid, hi="[0.4, 0.1, 0.1]")
     s = build_state(load_case(p))
     assert s.points.x[:, 0].max() < 0.4 and s.grid.periodic.tolist() == [True, False, False]
-    p.write_text(case + '[[boundaries]]\ntype = "roller"\nface = "x-"\n')
+    p = small_case(tmp_path, grid=grid, hi="[0.4, 0.1, 0.1]",
+                   extra='[[boundaries]]\ntype = "roller"\nface = "x-"')
     with pytest.raises(ConfigError, match=r"boundaries\[0\].face = 'x-'.*periodic"):
         load_case(p)
-    p.write_text(case.replace("hi = [0.4, 0.1, 0.1]", "hi = [0.6, 0.1, 0.1]"))
+    p = small_case(tmp_path, grid=grid, hi="[0.6, 0.1, 0.1]")  # beyond the period
     with pytest.raises(ConfigError, match="bodies"):
         build_state(load_case(p))

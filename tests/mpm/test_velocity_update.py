@@ -3,7 +3,7 @@ dissipates by an amount that depends on the time step (issue: flow numerics)."""
 
 import numpy as np
 import pytest
-from mpmutil import elastic_box, rollers
+from mpmutil import elastic_box, rollers, small_case
 
 from grainscale.config.base import ConfigError, load_toml
 from grainscale.config.case import Case
@@ -53,33 +53,8 @@ def test_flip_blend_dissipation_depends_on_the_time_step():
     assert abs(_bar_energy("apic", 1.0, 0.25, 10) - 1.0) < 2e-3
 
 
-CASE = """
-[grid]
-cell_size = 0.1
-cells = [2, 2, 2]
-[solver]
-{solver}
-[time]
-end = 1.0
-[materials.m]
-type = "linear_elastic"
-density = 1000.0
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-[[bodies]]
-shape = "box"
-material = "m"
-lo = [0, 0, 0]
-hi = [0.1, 0.1, 0.1]
-[output]
-interval = 0.1
-"""
-
-
 def _load(tmp_path, solver):
-    p = tmp_path / "case.toml"
-    p.write_text(CASE.format(solver=solver))
-    return load_toml(p, Case)
+    return load_toml(small_case(tmp_path, solver=solver), Case)
 
 
 def test_velocity_update_keys(tmp_path):

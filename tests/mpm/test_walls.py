@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from mpmutil import elastic_box, rollers
+from mpmutil import elastic_box, rollers, small_case
 
 from grainscale.config.base import ConfigError, load_toml
 from grainscale.config.case import Case
@@ -89,29 +89,6 @@ def test_block_lifts_off_a_one_sided_wall(separable):
         assert z[-1] - z[0] < 0.05 * 0.5 * g * t[-1] ** 2  # held: a fraction of free fall
 
 
-CASE = """
-[grid]
-cell_size = 0.1
-cells = [2, 2, 2]
-[time]
-end = 1.0
-[materials.m]
-type = "linear_elastic"
-density = 1000.0
-youngs_modulus = 1e6
-poisson_ratio = 0.3
-[[bodies]]
-shape = "box"
-material = "m"
-lo = [0, 0, 0]
-hi = [0.1, 0.1, 0.1]
-[[boundaries]]
-{bc}
-[output]
-interval = 0.1
-"""
-
-
 @pytest.mark.parametrize("bc,message", [
     ('type = "friction"\nface = "z-"', "`friction`"),
     ('type = "roller"\nface = "z-"\nfriction = 0.3', "`friction`"),
@@ -120,8 +97,7 @@ interval = 0.1
     ('type = "friction"\nfriction = 0.3\nbox = { lo = [0, 0, 0], hi = [1, 1, 0] }', "face"),
 ])
 def test_wall_keys_are_checked(tmp_path, bc, message):
-    p = tmp_path / "case.toml"
-    p.write_text(CASE.format(bc=bc))
+    p = small_case(tmp_path, extra=f"[[boundaries]]\n{bc}")
     with pytest.raises(ConfigError, match=message):
         load_toml(p, Case)
 
@@ -129,9 +105,9 @@ def test_wall_keys_are_checked(tmp_path, bc, message):
 def test_case_file_builds_walls(tmp_path):
     from grainscale.mpm.setup import build_state
 
-    p = tmp_path / "case.toml"
-    p.write_text(CASE.format(bc='type = "friction"\nface = "z-"\nfriction = 0.4') +
-                 '[[boundaries]]\ntype = "roller"\nface = "x-"\nseparable = true\n')
+    p = small_case(tmp_path, extra='[[boundaries]]\ntype = "friction"\nface = "z-"\n'
+                   'friction = 0.4\n[[boundaries]]\ntype = "roller"\nface = "x-"\n'
+                   'separable = true')
     s = build_state(load_toml(p, Case))
     assert [(w.axis, w.inward, w.friction) for w in s.walls] == [(2, 1.0, 0.4), (0, 1.0, 0.0)]
     assert not s.constraints
