@@ -135,6 +135,9 @@ def grid_velocity(s: MPMState) -> None:
     v = np.zeros_like(s.momentum)
     a = s.active
     v[a] = s.momentum[a] / s.mass[a, None]
+    # FLIP's increment is taken from the mapped velocity, before the boundaries act, so
+    # the impulse of a wall or of the rigid body reaches the points too
+    s.v_mapped = v.copy() if s.velocity_update == "flip" else v
     impose(s, v)
     if s.rigid is not None:
         v[s.rigid_nodes] = s.rigid_v
@@ -206,7 +209,7 @@ def g2p(s: MPMState, dt: float) -> None:
     pts = s.points
     g = s.grid
     flip = 0.0 if s.velocity_update == "apic" else s.flip
-    g2p_kernel(s.v_old, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
+    g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
                s.velocity_update == "apic", g.origin, g.upper, pts.x, pts.v, pts.C,
                s.chunk_vmax, s.chunk_out)
     n_out = int(s.chunk_out.sum())

@@ -315,7 +315,8 @@ def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
     """Point velocity (seed Eq. 18) and position (seed Eq. 19) update.
 
     v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
-    (FLIP/PIC blend, seed Eq. 18; flip = 0 is PIC) and, with apic = True, the affine
+    (FLIP/PIC blend, seed Eq. 18; flip = 0 is PIC; v_old is the mapped velocity before
+    the boundaries acted, so their impulse reaches the points) and, with apic = True, the affine
     velocity C_p <- sum v_new (x) grad S. APIC (Jiang et al. 2015) is apic with flip = 0,
     in the velocity-gradient form of Taylor PIC (Nakamura et al. 2023), exactly APIC for
     linear shape functions. With apic = False C_p is left untouched (zero).
