@@ -120,6 +120,8 @@ def plot(results: list[dict], histories: dict, png: Path) -> None:
         bx.plot([r["cell_mm"] for r in rows], [r["runout"] for r in rows],
                 styles[mat] + "o", color="k", label=rows[0]["label"])
     bx.set_xscale("log")
+    bx.set_xticks(sizes, [f"{mm:g}" for mm in sizes])
+    bx.minorticks_off()
     bx.set_xlabel("cell size (mm)")
     bx.set_ylabel("final runout at 7 tau_c")
     bx.set_ylim(bottom=0)
