@@ -126,6 +126,41 @@ def test_resume_gives_the_same_history(tmp_path):
     assert (part / "history.csv").read_text() == (full / "history.csv").read_text()
 
 
+def test_the_same_command_resumes_to_the_same_end(tmp_path):
+    """--max-steps counts the whole run's steps, as time.end is a time of the whole run:
+    a run stopped early (here by --steps-this-run, a per-job budget) and resumed with the
+    identical command ends at the same step with a byte-identical history (it used to
+    count from the resume point and run on to 38)."""
+    case = _case(tmp_path)
+    ref, part = tmp_path / "ref", tmp_path / "part"
+    cmd = ["run", str(case), "--checkpoint-every", "10", "--max-steps", "25", "--quiet"]
+    assert main([*cmd, "--out", str(ref)]) == 0
+    assert _rows(ref / "history.csv")[-1].startswith("25,")
+    assert main([*cmd, "--out", str(part), "--steps-this-run", "13"]) == 0
+    assert _rows(part / "history.csv")[-1].startswith("13,")
+    assert main([*cmd, "--out", str(part), "--resume"]) == 0
+    assert (part / "history.csv").read_bytes() == (ref / "history.csv").read_bytes()
+    assert main([*cmd, "--out", str(part), "--resume"]) == 0  # already at its end
+    assert (part / "history.csv").read_bytes() == (ref / "history.csv").read_bytes()
+
+
+def test_progress_in_a_log_is_plain_lines(tmp_path, capsys, monkeypatch):
+    """Without a terminal (a batch job's log) the run writes plain progress lines every
+    PLAIN_INTERVAL_S of wall time and one at the end, not a redrawn bar per update."""
+    from grainscale.io import progress
+
+    case = _case(tmp_path)
+    assert main(["run", str(case), "--out", str(tmp_path / "a"), "--max-steps", "40"]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("progress:")]
+    assert len(lines) == 1 and "step 40," in lines[0] and "ETA" in lines[0]  # 30 s apart
+    monkeypatch.setattr(progress, "PLAIN_INTERVAL_S", 0.0)
+    assert main(["run", str(case), "--out", str(tmp_path / "b"), "--max-steps", "40"]) == 0
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("progress:")]
+    assert len(lines) == 41  # one per step at interval 0, and the final one
+    assert "\r" not in err  # no bar redraws in the log
+
+
 def test_bad_case_exit_code_2(tmp_path, capsys):
     p = tmp_path / "bad.toml"
     p.write_text(textwrap.dedent(CASE).replace("cell_size = 0.05", "cell_size = 0.0"))

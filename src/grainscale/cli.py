@@ -37,7 +37,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("case", type=Path, help="case file (TOML)")
     run.add_argument("--out", type=Path, required=True, help="output folder")
     run.add_argument("--max-steps", type=_positive_int, default=None,
-                     help="stop after this many steps (a final history row is still written)")
+                     help="end the run at this step, counted from time.start like time.end "
+                          "(a final history row is still written); the same command with "
+                          "--resume after a stop ends at the same step")
+    run.add_argument("--steps-this-run", type=_positive_int, default=None,
+                     help="take at most this many steps in this invocation (a per-job "
+                          "budget; continue later with --resume)")
     run.add_argument("--checkpoint-every", type=_positive_int, default=None,
                      help="write a checkpoint every N steps (overrides the case file)")
     run.add_argument("--resume", action="store_true",
@@ -86,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             comm = world()
             root = comm.root
             return run_case(args.case, args.out, max_steps=args.max_steps,
+                            steps_this_run=args.steps_this_run,
                             checkpoint_every=args.checkpoint_every, resume=args.resume,
                             progress=not args.quiet, threads=args.threads, comm=comm)
         if args.command == "rve":

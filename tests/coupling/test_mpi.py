@@ -162,7 +162,7 @@ def test_restart_under_mpi_on_any_rank_count(rve_case, serial, tmp_path):
     parts = list((out / "checkpoint.parts").iterdir())
     assert [p.name for p in parts] == ["0000000009_2"]  # the end-of-run one, older removed
     assert len(list(parts[0].iterdir())) == 2  # one part per rank
-    r = mpirun(2, [*common, "--resume", "--max-steps", "4"])  # same rank count
+    r = mpirun(2, [*common, "--resume", "--steps-this-run", "4"])  # same rank count
     assert r.returncode == 0, r.stderr
     r = mpirun(3, [*common, "--resume"])  # and a different one
     assert r.returncode == 0, r.stderr

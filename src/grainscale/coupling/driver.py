@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numba
 import numpy as np
-from tqdm import tqdm
 
 from grainscale.config.base import ConfigError, resolved_toml
 from grainscale.config.case import Case, load_case
@@ -37,6 +36,7 @@ from grainscale.coupling.rebalance import rebalance
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.distributed.comm import Comm, world
 from grainscale.io.history import History
+from grainscale.io.progress import Progress
 from grainscale.io.vtk import PVDSeries, write_points_vtu
 from grainscale.mpm.materials import KINDS
 from grainscale.mpm.setup import build_state
@@ -137,10 +137,16 @@ def prepare_materials(case: Case, case_dir: Path, out: Path, comm: Comm, progres
 
 
 def run_case(case_path, out, *, max_steps: int | None = None,
+             steps_this_run: int | None = None,
              checkpoint_every: int | None = None, resume: bool = False,
              progress: bool = True, threads: int | None = None,
              comm: Comm | None = None) -> int:
     """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error).
+
+    max_steps ends the run at that step of the whole run (counted from time.start, as
+    time.end is a time of the whole run), so the same command given again with
+    `resume` after any stop ends at the same step; steps_this_run caps the steps taken
+    by this call alone (a per-job budget).
     Input errors are raised as ConfigError, on every rank alike (the checks after the
     ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
@@ -154,7 +160,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                           "resume from")
     check_geometry(case, case_path.parent)  # every input check before long computations
     try:
-        return _run(case, case_path, out, comm, max_steps, every, resume, progress)
+        return _run(case, case_path, out, comm, max_steps, steps_this_run, every, resume,
+                    progress)
     except ConfigError:
         raise  # raised by every rank (see above): printed once by rank 0
     except BaseException:
@@ -166,8 +173,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
         raise
 
 
-def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: int,
-         resume: bool, progress: bool) -> int:
+def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, steps_this_run,
+         every: int, resume: bool, progress: bool) -> int:
     root = comm.root
     progress = progress and root
     factory = prepare_materials(case, case_path.parent, out, comm, progress)
@@ -237,15 +244,10 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
     steps_run = 0
     saved_step = s.step if resume else -1
     code = 0
-    bar = tqdm(total=t_end - t0, initial=s.time - t0, disable=not progress, file=sys.stderr,
-               unit="s", dynamic_ncols=True,
-               bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} s [{elapsed}<{remaining}"
-                          "{postfix}]")
+    bar = Progress(t0, t_end, s.time, s.step, progress)
     comm.bytes_reduced = 0
     step_comm = step_wait = 0.0  # inside the steps (not outputs', checkpoints')
-    tick = wallclock.perf_counter()
-    tick_step = s.step
-    run_start = tick
+    run_start = wallclock.perf_counter()
     step_seconds = 0.0
     try:
         while True:
@@ -262,8 +264,9 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
             if every and s.step % every == 0 and s.step > 0 and steps_run > 0:
                 checkpoints.save(out, s, counters())
                 saved_step = s.step
-            if s.time >= t_end - 1e-12 * (t_end - t0) or (
-                    max_steps is not None and steps_run >= max_steps):
+            if (s.time >= t_end - 1e-12 * (t_end - t0)
+                    or (max_steps is not None and s.step >= max_steps)
+                    or (steps_this_run is not None and steps_run >= steps_this_run)):
                 break
             t_step = wallclock.perf_counter()
             c0, w0 = comm.comm_seconds, comm.wait_seconds
@@ -286,12 +289,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, every: i
                 balance = {"rebalances": balance["rebalances"] + 1,
                            "imbalance_before_last": moved["before"],
                            "imbalance_after_last": moved["after"]}
-            bar.update(dt)
-            now = wallclock.perf_counter()
-            if now - tick > 1.0:
-                bar.set_postfix_str(f"step {s.step}, {(s.step - tick_step) / (now - tick):.0f} "
-                                    "steps/s", refresh=False)
-                tick, tick_step = now, s.step
+            bar.update(dt, s.step)
         if every and saved_step != s.step:  # before the final row: a resume drops it
             checkpoints.save(out, s, counters())
     except SimulationError as err:
