@@ -72,6 +72,42 @@ def test_normal_impact_duration_and_restitution():
     assert np.allclose(b.v[0, :, 1:], 0.0, atol=0.0)
 
 
+@pytest.mark.parametrize("e", [0.3, 0.6, 0.9])
+def test_restitution_of_a_binary_impact(e):
+    """Normal dashpot c_n = 2 gamma sqrt(m* kn), gamma = -ln e / sqrt(pi^2 + ln^2 e):
+    a head-on collision of two unequal spheres rebounds with -v_rel,out / v_rel,in = e.
+
+    The dashpot reads the leapfrog's half-step velocities, a lag of dt/2. Measured at
+    dt = 0.01 sqrt(m_min/k_max) (~300 steps a contact): 0.2989, 0.5984, 0.8998 for
+    e = 0.3, 0.6, 0.9 (at 0.02, e = 0.3 gives 0.2971, and smaller steps converge to
+    0.2988: a 0.4 % residual at strong damping, not located). 1 % is the issue's
+    tolerance; a c_n off by sqrt(2) (m for m*) or gamma = -ln e / pi moves e by > 5 %.
+    """
+    r1, r2 = 1.0e-3, 1.5e-3
+    v0 = 0.01
+    b = two_spheres([3e-3, 5e-3, 5e-3], [3e-3 + r1 + r2 + 2e-6, 5e-3, 5e-3], r1, r2)
+    m1, m2 = b.mass[0]
+    b.v[0, 0, 0] = v0
+    b.v[0, 1, 0] = -v0 * m1 / m2
+    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.5, friction=0.5, damping=0.0,
+                             skin=0.2e-3, restitution=e)
+    dt = engine.critical_dt(b, p, 0.01)
+    ctrl = engine.rate_control(1)
+    rr = r1 + r2
+    vrel0 = b.v[0, 1, 0] - b.v[0, 0, 0]
+    touched = False
+    for _ in range(8000):
+        engine.advance(b, 1, dt, p, ctrl)
+        gap = distance(b) - rr
+        touched = touched or gap < 0
+        if touched and gap > 1e-6:
+            break
+    assert touched and gap > 0
+    vrel1 = b.v[0, 1, 0] - b.v[0, 0, 0]
+    assert -vrel1 / vrel0 == pytest.approx(e, rel=0.01)
+    assert abs(b.mass[0] @ b.v[0, :, 0]) < 1e-12 * m1 * v0  # momentum kept
+
+
 def test_stick_then_slip_at_coulomb_limit():
     """Fixed overlap, tangential sliding imposed by spinning both spheres (centres held):
     |ft| = kt u_t while kt u_t < mu fn, then exactly mu fn; reversing the sliding unloads

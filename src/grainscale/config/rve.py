@@ -73,6 +73,9 @@ class RVEParams(StrictModel):
     young_modulus: float = Field(100e6, gt=0, description="E in kn = E r* [Pa]")
     stiffness_ratio: float = Field(0.8, gt=0, le=1.0, description="kt/kn")
     friction: float = Field(0.5, ge=0, le=10, description="interparticle friction mu")
+    restitution: float = Field(
+        1.0, gt=0, le=1, description="normal coefficient of restitution e of a binary "
+        "collision (linear spring-dashpot); 1: elastic, no collisional loss")
     damping: float = Field(0.2, ge=0, lt=1, description="local non-viscous damping")
     seed: int = Field(1, ge=0)
     preparation: Preparation = Preparation()

@@ -7,6 +7,7 @@ overflows and retries, and turns kernel status codes into clear errors.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,14 @@ class ContactParams:
     friction: float         # mu = tan(phi_interparticle)
     damping: float = 0.0    # Cundall local non-viscous damping coefficient [0, 1)
     skin: float = 1e-3      # Verlet skin [m]
+    restitution: float = 1.0  # normal coefficient of restitution e, (0, 1]; 1: elastic
+
+    @property
+    def gamma(self) -> float:
+        """Damping ratio of the normal dashpot giving restitution e to a linear spring:
+        gamma = -ln e / sqrt(pi^2 + ln^2 e) (0 for e = 1)."""
+        le = math.log(self.restitution)
+        return -le / math.sqrt(math.pi**2 + le * le)
 
 
 @dataclass
@@ -144,7 +153,7 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
     l_mean = control.l_mean if control.l_mean is not None else np.zeros((r, 3, 3))
     while remaining.max() > 0:
         advance_batch(remaining, dt, params.young, params.stiffness_ratio, params.friction,
-                      params.damping, params.skin, batch.h, batch.s, batch.v, batch.w,
+                      params.gamma, params.damping, params.skin, batch.h, batch.s, batch.v, batch.w,
                       batch.rot, batch.radius, batch.mass, batch.inertia, batch.L,
                       batch.stress, batch.stress_servo, batch.stiffness, batch.step_count,
                       batch.nbr_j, batch.nbr_shift,
@@ -180,9 +189,9 @@ def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True, parallel=True)
-def _refresh(young, kt_ratio, friction, skin, h, s, v, w, radius, L, stress, stiffness,
-             nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild, force, torque, x,
-             link, wrapv, status, out):
+def _refresh(young, kt_ratio, friction, gamma, skin, h, s, v, w, radius, mass, L, stress,
+             stiffness, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild, force,
+             torque, x, link, wrapv, status, out):
     for r in prange(s.shape[0]):
         status[r] = OK
         if need_rebuild[r] != 0:
@@ -195,10 +204,10 @@ def _refresh(young, kt_ratio, friction, skin, h, s, v, w, radius, L, stress, sti
                 continue
             need_rebuild[r] = 0
         table = np.empty((27, 3))
-        nc, _ = contact_pass(0.0, young, kt_ratio, friction, h[r], s[r], v[r], w[r],
-                             radius[r], L[r], nbr_j[r], nbr_shift[r], nbr_count[r], ft[r],
-                             force[r], torque[r], x[r], table, stress[r], stiffness[r],
-                             True)
+        nc, _ = contact_pass(0.0, young, kt_ratio, friction, gamma, h[r], s[r], v[r], w[r],
+                             radius[r], mass[r], L[r], nbr_j[r], nbr_shift[r], nbr_count[r],
+                             ft[r], force[r], torque[r], x[r], table, stress[r],
+                             stiffness[r], True)
         out[r, 0] = nc
 
 
@@ -207,8 +216,9 @@ def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
     status = np.zeros(batch.n_rve, np.int64)
     out = np.zeros((batch.n_rve, 5))
     while True:
-        _refresh(params.young, params.stiffness_ratio, params.friction, params.skin,
-                 batch.h, batch.s, batch.v, batch.w, batch.radius, batch.L, batch.stress,
+        _refresh(params.young, params.stiffness_ratio, params.friction, params.gamma,
+                 params.skin, batch.h, batch.s, batch.v, batch.w, batch.radius, batch.mass,
+                 batch.L, batch.stress,
                  batch.stiffness, batch.nbr_j, batch.nbr_shift, batch.nbr_count, batch.ft,
                  batch.s_ref, batch.h_ref, batch.need_rebuild, batch.force, batch.torque,
                  batch.x, batch.link, batch.wrapv, status, out)

@@ -44,7 +44,7 @@ def contact_params(params: RVEParams, friction: float | None = None,
         young=params.young_modulus, stiffness_ratio=params.stiffness_ratio,
         friction=params.friction if friction is None else friction,
         damping=params.damping if damping is None else damping,
-        skin=params.numerics.skin * params.radius_min)
+        skin=params.numerics.skin * params.radius_min, restitution=params.restitution)
 
 
 def insert_random(n: int, rmin: float, rmax: float, porosity: float,

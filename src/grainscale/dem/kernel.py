@@ -72,9 +72,15 @@ def _sgn(a):
 
 
 @njit(cache=True, fastmath=True)
-def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nbr_shift,
-                 nbr_count, ft, force, torque, x, table, stress_out, stiff_out, homogenise):
+def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass, L, nbr_j,
+                 nbr_shift, nbr_count, ft, force, torque, x, table, stress_out, stiff_out,
+                 homogenise):
     """Contact forces and torques of one RVE at its current configuration.
+
+    Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
+    c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
+    restitution coefficient (0: elastic). The dashpot is not clipped, so an isolated
+    collision returns exactly e; the Coulomb cap uses max(f_n, 0).
 
     Updates the tangential history by dt (dt = 0 only re-projects it), fills force and
     torque (N) and, if `homogenise`, stress_out (3x3, Pa) and stiff_out (3x3 affine
@@ -147,6 +153,9 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
             vr1 = v[j, 1] - v[i, 1] + D01 * d0 + D11 * d1 + D12 * d2 - (wa2 * n0 - wa0 * n2)
             vr2 = v[j, 2] - v[i, 2] + D02 * d0 + D12 * d1 + D22 * d2 - (wa0 * n1 - wa1 * n0)
             vn = vr0 * n0 + vr1 * n1 + vr2 * n2
+            if gamma > 0.0:
+                mst = mass[i] * mass[j] / (mass[i] + mass[j])
+                fn -= 2.0 * gamma * math.sqrt(mst * kn) * vn
             # history: turn with the contact frame (mean-field spin plus the particles'
             # twist about n, to first order in dt), then drop its normal component
             f0 = ft[i, k, 0]
@@ -168,7 +177,7 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
             f0 += kt * (vr0 - vn * n0) * dt
             f1 += kt * (vr1 - vn * n1) * dt
             f2 += kt * (vr2 - vn * n2) * dt
-            cap = friction * fn
+            cap = friction * max(fn, 0.0)
             fm2 = f0 * f0 + f1 * f1 + f2 * f2
             if fm2 > cap * cap:
                 sc = cap / math.sqrt(fm2)
@@ -251,7 +260,7 @@ def contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L, nbr_j, nb
 
 
 @njit(cache=True, fastmath=True)
-def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
+def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
                 h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo, stiffness,
                 step_count,
                 nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
@@ -338,9 +347,9 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
         # last step homogenises anyway: the write costs nothing
         report = sample or (last and not servo_on)
         stiff_out = stiffness if report else stiff_scratch
-        ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, h, s, v, w, radius, L,
-                                      nbr_j, nbr_shift, nbr_count, ft, force, torque, x,
-                                      table, sig_out, stiff_out, sample or last)
+        ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius,
+                                      mass, L, nbr_j, nbr_shift, nbr_count, ft, force, torque,
+                                      x, table, sig_out, stiff_out, sample or last)
         if sample and last:
             stress[:, :] = stress_servo
         step_count[0] += 1
@@ -416,7 +425,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, damping, skin,
 
 
 @njit(cache=True, parallel=True)
-def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
+def advance_batch(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
                   h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo,
                   stiffness, step_count, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
                   need_rebuild, force, torque, x, link, wrapv,
@@ -425,7 +434,7 @@ def advance_batch(nsteps, dt, young, kt_ratio, friction, damping, skin,
     """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs."""
     for r in prange(s.shape[0]):
         status[r] = advance_rve(
-            nsteps[r], dt, young, kt_ratio, friction, damping, skin,
+            nsteps[r], dt, young, kt_ratio, friction, gamma, damping, skin,
             h[r], s[r], v[r], w[r], rot[r], radius[r], mass[r], inertia[r], L[r],
             stress[r], stress_servo[r], stiffness[r], step_count[r:r + 1], nbr_j[r],
             nbr_shift[r], nbr_count[r], ft[r],
