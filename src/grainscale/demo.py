@@ -39,6 +39,7 @@ end = {end}              # s: {strain:.0%} axial strain at a true strain rate of
 
 [materials.sand]
 type = "dem"
+allow_rve_damping = true # [rve] damping as in the pure-DEM test: harmless at this rate
 
 [[bodies]]
 shape = "box"

@@ -140,6 +140,10 @@ class DEMMaterialCfg(StrictModel):
     library: Annotated[int, Field(ge=1, le=256)] = 1
     assignment_seed: Annotated[int, Field(ge=0)] = 0  # random packing-to-point assignment
     time_integration: Literal["dynamic", "quasi_static"] = "dynamic"
+    # dynamic RVEs live in real time, where [rve] damping is an artificial viscosity: it
+    # defaults to 0 for them and a value above 0 is refused unless allowed here (a
+    # quasi-static load, like the unit element's, where it is harmless)
+    allow_rve_damping: bool = False
     min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
     strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
     # an RVE cell narrower than this many mean grain diameters across a face pair is
@@ -320,6 +324,20 @@ def check_case(case: Case) -> None:
         if m.type == "dem" and m.density is not None:
             raise ConfigError(f"materials.{name}.density = {m.density}: a 'dem' material's "
                               "density is that of its packings; remove the key")
+    dynamic = [n for n, m in case.materials.items()
+               if m.type == "dem" and m.time_integration == "dynamic"]
+    if dynamic and case.rve is not None:
+        if "damping" not in case.rve.model_fields_set:
+            case.rve.damping = 0.0  # written so in case.resolved.toml
+        elif case.rve.damping > 0:
+            for name in dynamic:
+                if not case.materials[name].allow_rve_damping:
+                    raise ConfigError(
+                        f"rve.damping = {case.rve.damping} with materials.{name}."
+                        "time_integration = 'dynamic': in a real-time RVE local damping "
+                        "acts as an artificial viscosity (docs/coupling.md); valid: 0, or "
+                        f"set materials.{name}.allow_rve_damping = true for a quasi-static "
+                        "load where it is harmless")
     for i, b in enumerate(case.bodies):
         if b.material not in case.materials:
             raise ConfigError(f"bodies[{i}].material = {b.material!r}: no such material; "
