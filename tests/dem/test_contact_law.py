@@ -325,3 +325,23 @@ def test_rigid_rotation_of_a_loaded_pair_loads_no_tangential_spring():
     = 0.4 fn at theta = 0.5 rad."""
     ft_max, fn, mu, _ = _pressed_pair_rotation("particles")
     assert ft_max < 1e-3 * mu * fn
+
+
+def test_kinetic_stress_of_a_granular_gas():
+    """Spheres that never touch carry no contact force; the homogenised stress is then
+    the kinetic stress alone, sigma = -(1/V) sum m v' (x) v' (an ideal gas: p =
+    sum m |v'|^2 / 3V), exact up to round-off. The stress of the step is taken with the
+    velocities it starts from (leapfrog), which are the ones set here."""
+    rng = np.random.default_rng(4)
+    side = 20e-3
+    x = np.array([[2, 2, 2], [8, 8, 8], [14, 2, 9], [5, 15, 12]], float) * 1e-3
+    b = from_packing(np.eye(3) * side, x, np.full(4, 0.5e-3), DENSITY, capacity=4)
+    b.v[0] = rng.normal(0.0, 0.01, (4, 3))
+    v0 = b.v[0].copy()
+    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.5, friction=0.5, skin=0.2e-3)
+    engine.advance(b, 1, 1e-6, p, engine.rate_control(1))
+    assert b.ncontact[0] == 0
+    expected = -np.einsum("p,pa,pb->ab", b.mass[0], v0, v0) / side**3
+    np.testing.assert_allclose(b.stress[0], expected, rtol=1e-12, atol=0)
+    pressure = -np.trace(b.stress[0]) / 3
+    assert pressure == pytest.approx((b.mass[0] * (v0**2).sum(1)).sum() / (3 * side**3))

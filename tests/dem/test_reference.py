@@ -89,7 +89,9 @@ def reference_step(st, p, dt, lc):
     tq = np.cross(nrm, g)
     np.add.at(torque, i, li[:, None] * tq)
     np.add.at(torque, j, lj[:, None] * tq)
-    stress = np.einsum("ca,cb->ab", d, fc) / np.linalg.det(h)
+    # Love-Weber plus the kinetic stress of the (pre-update) fluctuating velocities
+    kinetic = np.einsum("p,pa,pb->ab", st["mass"], v, v)
+    stress = (np.einsum("ca,cb->ab", d, fc) - kinetic) / np.linalg.det(h)
     # integration with the new cell
     h_new = h + dt * hdot
     alpha = p.damping

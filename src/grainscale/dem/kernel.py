@@ -21,7 +21,8 @@ Per step of one RVE (dt fixed):
    particle spins w are fluctuations about W; a rigidly rotating cell therefore makes no
    slip at any contact (objectivity).
 3. Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
-   first particle and d = x_j - x_i, so compression is negative (tension positive), and
+   first particle and d = x_j - x_i, so compression is negative (tension positive), minus
+   the kinetic stress (1/V) sum m v' (x) v' of the fluctuating velocities v', and
    the affine stiffness C_ab, on servo samples and on the last step of a call. Without
    a servo, `stiffness` holds the last step's C (the MPM's wave speed reads it).
 4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion:
@@ -237,6 +238,22 @@ def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass,
         torque[i, 2] += ti2
     if not homogenise:
         return ncontact, fsum
+    # kinetic (Reynolds) stress of the fluctuating motion, -(1/V) sum m v' (x) v': the
+    # momentum the grains carry across any plane, a pressure in dilute or fast flow
+    for i in range(n):
+        mi = mass[i]
+        u0 = v[i, 0]
+        u1 = v[i, 1]
+        u2 = v[i, 2]
+        sxx -= mi * u0 * u0
+        sxy -= mi * u0 * u1
+        sxz -= mi * u0 * u2
+        syx -= mi * u1 * u0
+        syy -= mi * u1 * u1
+        syz -= mi * u1 * u2
+        szx -= mi * u2 * u0
+        szy -= mi * u2 * u1
+        szz -= mi * u2 * u2
     vol = (h[0, 0] * (h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1])
            - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
            + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
