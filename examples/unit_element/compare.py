@@ -23,7 +23,6 @@ from grainscale.cli import main as grainscale
 from grainscale.config.rve import load_rve_case
 from grainscale.dem import element_tests
 from grainscale.dem.generate import generate
-from grainscale.dem.state import concatenate
 from grainscale.io.plots import plot_stress_path
 
 HERE = Path(__file__).resolve().parent
@@ -32,16 +31,7 @@ HERE = Path(__file__).resolve().parent
 def dem_ensemble(case: Path, replicas: int) -> dict[str, np.ndarray]:
     """Mean stress path of `replicas` perturbed copies of the case's RVE."""
     c = load_rve_case(case)
-    base = generate(c.rve)
-    rng = np.random.default_rng(0)
-    copies = []
-    for _ in range(replicas):
-        b = base.copy()
-        b.v += rng.normal(0.0, 1e-9, b.v.shape)
-        copies.append(b)
-    per_rve = element_tests.triaxial(concatenate(copies), c.rve, c.triaxial, every_rve=True)
-    cols = per_rve[0][0].keys()
-    return {k: np.mean([[row[k] for row in rows] for rows in per_rve], axis=0) for k in cols}
+    return element_tests.triaxial_ensemble(generate(c.rve), c.rve, c.triaxial, replicas)
 
 
 def compare(case: Path, out: Path, quiet: bool = False, replicas: int = 0) -> dict:

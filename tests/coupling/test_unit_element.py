@@ -2,15 +2,22 @@
 DEM curves of the same RVE.
 
 Reduced: RVEs of 300 instead of 800 spheres, loaded to 6 % axial strain (through the
-peak) at 0.5 /s. Up to the peak the two runs follow the same packing through nearly the
-same deformation; past it, each RVE is one chaotic realisation of strain softening and
-the curves separate within the RVE's noise (docs/validation.md shows the full run).
+peak) at 0.5 /s. The multiscale curve is the mean of 8 points whose RVEs start as copies
+of one packing and decorrelate (their dH differ in the last bits, the DEM is chaotic);
+its like-for-like reference is the mean of 8 pure-DEM realisations of the same packing
+(velocities perturbed by 1e-9 m/s), as in docs/validation.md §1. One realisation against
+one is sampling noise: the peak q/p of a single 300-sphere run moved by 3.6 % when the
+packing changed (kinetic stress in the consolidation servo), against 0.7 % for the
+multiscale mean.
 """
 
 import pytest
 
 from grainscale.analysis import read_columns, unit_element_metrics
 from grainscale.cli import main
+from grainscale.config.rve import load_rve_case
+from grainscale.dem.element_tests import triaxial_ensemble
+from grainscale.dem.generate import generate
 from grainscale.demo import demo_case
 
 
@@ -20,8 +27,9 @@ def runs(tmp_path_factory):
     case = out / "case.toml"
     case.write_text(demo_case(particles=300, strain=0.06, rate=0.5))
     assert main(["run", str(case), "--out", str(out / "ms"), "--quiet"]) == 0
-    assert main(["rve", "triaxial", str(case), "--out", str(out / "dem.csv"), "--quiet"]) == 0
-    return read_columns(out / "dem.csv"), read_columns(out / "ms" / "history.csv")
+    c = load_rve_case(case)
+    dem = triaxial_ensemble(generate(c.rve), c.rve, c.triaxial, replicas=8)
+    return dem, read_columns(out / "ms" / "history.csv")
 
 
 def test_multiscale_curves_lie_on_the_pure_dem_curves(runs):
@@ -29,6 +37,7 @@ def test_multiscale_curves_lie_on_the_pure_dem_curves(runs):
     m = unit_element_metrics(dem, ms)
     assert m["axial_strain_compared"] == pytest.approx(0.06, abs=1e-3)
     # the issue's acceptance: peak q/p within 3 %, mean deviations within 3 % of range
+    # (measured against the 8-realisation mean: 0.5 %, 1.3-1.4 %)
     assert m["peak_relative_difference"] < 0.03, m
     for key in ("q_over_p", "volumetric_strain"):
         assert m[f"mad_{key}_over_dem_range"] < 0.03, m

@@ -23,7 +23,9 @@ def independent_state(b, params):
     i, j, d, fn, ft = contact_list(c, params.young_modulus)
     n = d / np.linalg.norm(d, axis=1)[:, None]
     f_on_i = ft - fn[:, None] * n
-    stress = np.einsum("ca,cb->ab", d, f_on_i) / np.linalg.det(c.h[0])
+    # Love-Weber plus the kinetic stress of the residual grain velocities
+    kinetic = np.einsum("p,pa,pb->ab", c.mass[0], c.v[0], c.v[0])
+    stress = (np.einsum("ca,cb->ab", d, f_on_i) - kinetic) / np.linalg.det(c.h[0])
     net = np.zeros((b.n_particles, 3))
     np.add.at(net, i, f_on_i)
     np.add.at(net, j, -f_on_i)
