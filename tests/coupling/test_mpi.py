@@ -28,7 +28,6 @@ from grainscale.io.rve_h5 import read_rve_state
 sys.path.insert(0, str(Path(__file__).parent))
 from test_multiscale_run import small_unit_element  # noqa: E402
 
-SRC = Path(__file__).resolve().parents[2] / "src"
 MPIEXEC = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which(
     "mpiexec")
 pytestmark = pytest.mark.skipif(MPIEXEC is None, reason="no mpiexec (install the mpich wheel)")
@@ -73,7 +72,7 @@ history = ["time", "kinetic_energy", "p", "q", "volumetric_strain"]
 
 def mpirun(n: int, args: list[str], timeout: float = 300, script: Path | None = None):
     """`mpiexec -n n python -m grainscale ARGS` (or python SCRIPT ARGS); CompletedProcess."""
-    env = {**os.environ, "PYTHONPATH": str(SRC), "NUMBA_NUM_THREADS": "1"}
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     target = [str(script)] if script else ["-m", "grainscale"]
     return subprocess.run([MPIEXEC, "-n", str(n), sys.executable, *target, *args], env=env,
                           capture_output=True, text=True, timeout=timeout)
@@ -220,7 +219,7 @@ def test_fresh_compilation_and_cached_kernels_agree(tmp_path):
     kernels are now inlined at numba's level (inline="always")."""
     case = tmp_path / "mc.toml"
     case.write_text(textwrap.dedent(MOHR_COULOMB))
-    env = {**os.environ, "PYTHONPATH": str(SRC), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     for name in ("cold", "warm"):
         subprocess.run([sys.executable, "-m", "grainscale", "run", str(case), "--out",
                         str(tmp_path / name), "--quiet"], env=env, check=True, timeout=600)
