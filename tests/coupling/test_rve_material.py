@@ -120,6 +120,23 @@ def test_an_rve_that_cannot_go_on_stops_the_run_cleanly(small_rve):
             mat.update(dH, 1e-3, stress)
 
 
+@pytest.mark.parametrize("bad", [0.6, float("nan")])
+def test_an_increment_the_rve_cannot_take_names_the_point(small_rve, bad):
+    """An increment too large for the RVE's matrix logarithm (|dH| >= 0.5), or not
+    finite, stops the run as a SimulationError naming the material and the point, like
+    any RVE failure (it was a bare ValueError from inside the DEM engine)."""
+    from grainscale.mpm.step import SimulationError
+
+    params, packing = small_rve
+    mat = RVEMaterial("sand", params, [packing], n_points=3)
+    stress = mat.initial_stress()
+    dH = np.zeros((3, 3, 3))
+    dH[2, 0, 1] = bad
+    match = "material 'sand', its point 2: .*(too large|nan)"
+    with pytest.raises(SimulationError, match=match):
+        mat.update(dH, 1e-3, stress)
+
+
 def _extension(rates, d=0.01):
     """Isochoric plane extension increments (stretch along x, thinning along z) of log
     strain d times each point's rate factor."""

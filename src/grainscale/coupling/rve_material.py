@@ -163,8 +163,8 @@ class RVEMaterial:
                 nsteps = np.maximum(self.min_substeps,
                                     np.ceil(size / self.strain_per_substep)).astype(np.int64)
                 dt_dem = self.dt_crit
-            ctrl = engine.increment_control(batch, dH[rows], nsteps, dt_dem)
             try:
+                ctrl = engine.increment_control(batch, dH[rows], nsteps, dt_dem)
                 engine.advance(batch, nsteps, dt_dem, self.cp, ctrl)
             except engine.RVEError as err:
                 point = int(rows[err.rve])

@@ -90,11 +90,15 @@ def rate_control(n_rve: int, l_ctrl=None, servo: dict | None = None,
 
 
 def _logm_near_identity(a: np.ndarray) -> np.ndarray:
-    """log(I + a) for a batch (R,3,3) of small a by its power series [-]."""
-    norm = np.linalg.norm(a, axis=(1, 2)).max(initial=0.0)
-    if norm >= 0.5:
-        raise ValueError(f"displacement-gradient increment too large: |dH| = {norm:.3g} "
-                         "(must be < 0.5; take smaller MPM steps)")
+    """log(I + a) for a batch (R,3,3) of small a by its power series [-]; RVEError names
+    the first RVE whose |a| is too large for it to converge, or not finite."""
+    norms = np.linalg.norm(a, axis=(1, 2))
+    bad = np.flatnonzero(~(norms < 0.5))  # NaN counts as bad
+    if bad.size:
+        r = int(bad[0])
+        raise RVEError(r, f"displacement-gradient increment too large: |dH| = "
+                          f"{norms[r]:.3g} (must be < 0.5; take smaller MPM steps)")
+    norm = norms.max(initial=0.0)
     out = np.zeros_like(a)
     term = np.broadcast_to(np.eye(3), a.shape).copy()
     for k in range(1, 64):
