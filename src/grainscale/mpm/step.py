@@ -208,8 +208,7 @@ def g2p(s: MPMState, dt: float) -> None:
     """Point velocity (APIC or FLIP/PIC, seed Eq. 18) and position (seed Eq. 19)."""
     pts = s.points
     g = s.grid
-    flip = 0.0 if s.velocity_update == "apic" else s.flip
-    g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
+    g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, s.flip,
                s.velocity_update == "apic", g.origin, g.upper, pts.x, pts.v, pts.C,
                s.chunk_vmax, s.chunk_out)
     n_out = int(s.chunk_out.sum())

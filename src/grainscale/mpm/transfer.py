@@ -268,17 +268,19 @@ def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x
                     c20 += n2 * dx
                     c21 += n2 * dy
                     c22 += n2 * dz
-                if flip > 0.0:
+                else:
                     ax += S * (n0 - vold[I, 0])
                     ay += S * (n1 - vold[I, 1])
                     az += S * (n2 - vold[I, 2])
     if apic:
+        v0, v1, v2 = ux, uy, uz
         C[p, 0, 0], C[p, 0, 1], C[p, 0, 2] = c00, c01, c02
         C[p, 1, 0], C[p, 1, 1], C[p, 1, 2] = c10, c11, c12
         C[p, 2, 0], C[p, 2, 1], C[p, 2, 2] = c20, c21, c22
-    v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
-    v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
-    v2 = flip * (v[p, 2] + az) + (1.0 - flip) * uz
+    else:
+        v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
+        v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
+        v2 = flip * (v[p, 2] + az) + (1.0 - flip) * uz
     v[p, 0] = v0
     v[p, 1] = v1
     v[p, 2] = v2
@@ -314,13 +316,13 @@ def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
                nout_out):
     """Point velocity (seed Eq. 18) and position (seed Eq. 19) update.
 
-    v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
-    (FLIP/PIC blend, seed Eq. 18; flip = 0 is PIC; v_old is the mapped velocity before
-    the boundaries acted, so their impulse reaches the points) and, with apic = True, the affine
-    velocity C_p <- sum v_new (x) grad S. APIC (Jiang et al. 2015) is apic with flip = 0,
-    in the velocity-gradient form of Taylor PIC (Nakamura et al. 2023), exactly APIC for
-    linear shape functions. With apic = False C_p is left untouched (zero).
-    Both: x_p <- x_p + dt sum S v_new.
+    APIC (apic = True; Jiang et al. 2015, in the velocity-gradient form of Taylor PIC,
+    Nakamura et al. 2023, which is exactly APIC for linear shape functions):
+        v_p <- sum S v_new,   C_p <- sum v_new (x) grad S
+    FLIP/PIC blend (apic = False; C_p is left untouched, zero):
+        v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
+    with v_old the mapped grid velocity before the boundaries acted, so that their
+    impulse reaches the points. Both: x_p <- x_p + dt sum S v_new.
     Per chunk: the largest point speed (for the CFL check) and the number of points
     whose centre left the grid box [lo, hi].
     """
