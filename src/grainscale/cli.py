@@ -73,6 +73,37 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--out", type=Path, required=True, help="CSV file of the stress path")
         p.add_argument("--plot", type=Path, default=None, help="PNG plot of the stress path")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    flow = rsub.add_parser(
+        "flow", help="steady simple shear at several rates: the RVE's mu(I) and its fit",
+        description="Steady simple shear of the RVE at constant normal stress, one run per "
+        "(pressure, rate): time-averaged I, mu = tau/sigma_n and porosity with 95 %% bands "
+        "(CSV), and a fit of mu(I) written as a [materials.X] type = \"mu_i\" table "
+        "(docs/dem.md: flow rule).")
+    flow.add_argument("params", type=Path, help="TOML file with an [rve] table")
+    flow.add_argument("--pressure", type=float, nargs="+", default=None, metavar="P",
+                      help="normal stress(es) sigma_n [Pa] (default: rve.preparation.pressure)")
+    rates = flow.add_mutually_exclusive_group(required=True)
+    rates.add_argument("--rates", type=float, nargs="+", metavar="GDOT",
+                       help="shear rates [1/s]")
+    rates.add_argument("--inertial", type=float, nargs="+", metavar="I",
+                       help="target inertial numbers instead (rate = I sqrt(P/rho_s)/d)")
+    flow.add_argument("--strain", type=float, default=3.0,
+                      help="shear strain of each run (default 3)")
+    flow.add_argument("--steady-from", type=float, default=1.0,
+                      help="average over shear strain >= this (default 1)")
+    flow.add_argument("--tiles", type=_positive_int, default=1,
+                      help="shear an n x n x n supercell of the packing (RVE-size effect)")
+    flow.add_argument("--packing", type=Path, default=None,
+                      help="start from this packing (.txt or .h5) instead of generating one")
+    flow.add_argument("--material", default="rve_fit",
+                      help="name of the fitted [materials.NAME] table (default rve_fit)")
+    flow.add_argument("--allow-damping", action="store_true",
+                      help="accept [rve] damping > 0 (it acts as a viscosity and biases mu)")
+    flow.add_argument("--out", type=Path, required=True,
+                      help="CSV of the steady values (the fitted table goes to OUT.mu_i.toml)")
+    flow.add_argument("--plot", type=Path, default=None, help="PNG plot of mu(I) and porosity")
+    flow.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
 

@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from grainscale import __version__
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVECase, RVEParams, load_rve_case
-from grainscale.dem import element_tests, engine
+from grainscale.dem import element_tests, engine, flow
 from grainscale.dem.generate import contact_params, generate
 from grainscale.dem.state import RVEBatch, from_packing
 from grainscale.io.packing import read_packing, write_packing
-from grainscale.io.plots import plot_stress_path
+from grainscale.io.plots import plot_flow, plot_stress_path
+from grainscale.io.progress import Progress
 from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 from grainscale.io.rve_vtk import write_rve_vtk
 
@@ -83,6 +86,8 @@ def dispatch(args: argparse.Namespace) -> int:
         _check_out(args.plot, (".png",), "--plot")
     if args.packing is not None and not args.packing.is_file():
         raise ConfigError(f"--packing = {str(args.packing)!r}: file does not exist")
+    if args.rve_command == "flow":
+        return run_flow(case, args)
     batch = prepared(case, args.packing, args.quiet)
     test, run, x = {
         "triaxial": (case.triaxial, element_tests.triaxial, "axial_strain"),
@@ -114,3 +119,106 @@ def dispatch(args: argparse.Namespace) -> int:
                          title=f"rve {args.rve_command}")
     print(f"wrote {args.out} ({len(rows)} rows)")
     return 0
+
+
+def _check_flow_args(case: RVECase, args: argparse.Namespace) -> None:
+    """Every bad option of `rve flow` named with its value and valid range."""
+    def positive(key: str, values) -> None:
+        for v in values:
+            if not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"{key} = {v!r}: must be a finite number > 0")
+
+    positive("--pressure", args.pressure or [case.rve.preparation.pressure])
+    positive("--rates" if args.rates else "--inertial", args.rates or args.inertial)
+    if not 0 < args.strain <= 20:
+        raise ConfigError(f"--strain = {args.strain!r}: valid range (0, 20]")
+    if not 0 <= args.steady_from <= args.strain - flow.MIN_WINDOW:
+        raise ConfigError(
+            f"--steady-from = {args.steady_from!r}: valid range [0, --strain - "
+            f"{flow.MIN_WINDOW}] = [0, {args.strain - flow.MIN_WINDOW:.3g}] (the steady "
+            "window needs enough samples for a confidence band)")
+    if args.tiles**3 * case.rve.particles > 10_000_000:
+        raise ConfigError(f"--tiles = {args.tiles}: {args.tiles}^3 x {case.rve.particles} "
+                          "particles exceeds 10,000,000")
+    if case.rve.damping > 0 and not args.allow_damping:
+        raise ConfigError(
+            f"rve.damping = {case.rve.damping!r}: local damping acts as a viscosity and "
+            "changes the measured mu(I); set it to 0 (valid range for a flow "
+            "measurement: 0), or pass --allow-damping to measure it anyway")
+    if not args.material.isidentifier():
+        raise ConfigError(f"--material = {args.material!r}: must be a TOML bare key "
+                          "(letters, digits, underscores)")
+
+
+def run_flow(case: RVECase, args: argparse.Namespace) -> int:
+    """`grainscale rve flow`: steady simple shear at each (pressure, rate), the steady
+    table as CSV, the mu(I) fit printed and written as a mu_i material table."""
+    _check_flow_args(case, args)
+    params = case.rve
+    pressures = args.pressure or [params.preparation.pressure]
+    start = prepared(case, args.packing, args.quiet)
+    d = flow.mean_diameter(start)
+    # affine (Voigt) P-wave modulus of the packing's contacts -> E at nu = 0.3: an upper
+    # bound, used only for the continuum's elastic predictor and time step
+    young = float(np.diagonal(start.stiffness[0]).mean()) * 1.3 * 0.4 / 0.7
+    batch = flow.tile(start, args.tiles, seed=params.seed)
+    cases = [(p, float(g)) for p in pressures
+             for g in (args.rates if args.rates else flow.rate_for(args.inertial, d,
+                                                                   params.density, p))]
+    dt = element_tests.timestep(batch, params)
+    durations = []  # simulated time of each run, as simple_shear rounds it to whole steps
+    for _, g in cases:
+        steps = max(1, round(flow.SAMPLE_STRAIN / (g * dt)))
+        durations.append(math.ceil(args.strain / (steps * g * dt) - 1e-9) * steps * dt)
+    bar = Progress(0.0, sum(durations), 0.0, 0, enabled=not args.quiet)
+    rows = []
+    for (p, g), done in zip(cases, np.cumsum([0.0, *durations[:-1]]), strict=True):
+        def on_row(row, done=done):
+            t = done + row["time"]
+            bar.update(t - bar.time, round(t / dt))
+
+        row, _ = flow.steady_shear(batch, params, p, g, args.strain, args.steady_from, on_row)
+        row["tiles"] = args.tiles
+        rows.append({c: row[c] for c in flow.COLUMNS})
+        print(f"P = {p:.4g} Pa, rate {g:.4g}/s: I = {row['I']:.4g}, mu = {row['mu']:.4f} "
+              f"+- {row['mu_err']:.4f}, mu_p = {row['mu_p']:.4f} +- {row['mu_p_err']:.4f}, "
+              f"porosity {row['porosity']:.4f}", flush=True)
+    bar.close()
+    _write_flow(args.out, rows, f"rve flow of {args.params} ({args.tiles}^3 tiles, "
+                f"d = {d:.6g} m, rho_s = {params.density:.6g} kg/m3, strain {args.strain}, "
+                f"steady from {args.steady_from})")
+    print(f"wrote {args.out} ({len(rows)} rows)")
+    col = {c: np.array([r[c] for r in rows]) for c in flow.COLUMNS}
+    fits = {}
+    try:
+        for m, i in (("mu", "I"), ("mu_p", "I_p")):
+            fits[m] = flow.fit_mu_i(col[i], col[m], col[f"{m}_err"])
+    except ValueError as err:
+        print(f"no mu(I) fit: {err}")
+    for m, f in fits.items():
+        bound = f"; {f['warning']}" if f["warning"] else ""
+        print(f"fit of {m}({'I' if m == 'mu' else 'I_p'}): mu_s = {f['mu_s']:.4f}, "
+              f"mu_2 = {f['mu_2']:.4f}, I_0 = {f['I_0']:.4g} (rms {f['rms']:.3g} bands"
+              f"{bound})")
+    if fits:
+        slowest = int(np.argmin(col["I_p"]))
+        table = flow.mu_i_table(args.material, fits["mu_p"], params, d,
+                                float(col["porosity"][slowest]), young, str(args.params))
+        path = args.out.with_suffix(".mu_i.toml")
+        path.write_text(table)
+        print(f"wrote {path}:\n{table}")
+    if args.plot is not None:
+        plot_flow(args.plot, col, fits, title=f"rve flow: {args.params.name}, "
+                  f"{args.tiles}^3 x {params.particles} grains")
+    return 0
+
+
+def _write_flow(path: Path, rows: list[dict], title: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as f:
+        f.write(f"# grainscale {__version__}: {title}\n# {flow.COLUMN_DOC}\n")
+        f.write(",".join(flow.COLUMNS) + "\n")
+        for r in rows:
+            f.write(",".join(repr(r[c]) if isinstance(r[c], int) else repr(float(r[c]))
+                             for c in flow.COLUMNS) + "\n")
+    tmp.replace(path)

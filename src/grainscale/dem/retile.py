@@ -32,34 +32,41 @@ def widths(h: np.ndarray) -> np.ndarray:
 
 
 def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
-    """RVE r of batch b with its cell doubled along edge k: a one-RVE batch of 2N grains.
+    """RVE r of batch b with its cell doubled along edge k (multiply_cell with m = 2)."""
+    return multiply_cell(b, r, k, 2)
 
-    Fractional coordinates along k halve (copy 1 adds 1/2); a neighbour entry (i, j,
-    image t) becomes, for each copy c of i, the pair (i + cN, j + c'N) with
-    c' = (c + t_k) mod 2 and new image t'_k = floor((c + t_k) / 2), other components
+
+def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
+    """RVE r of batch b with its cell taken m times along edge k: a one-RVE batch of mN
+    grains (the same periodic system, every contact with its tangential history).
+
+    Fractional coordinates along k are divided by m (copy c adds c/m); a neighbour entry
+    (i, j, image t) becomes, for each copy c of i, the pair (i + cN, j + c'N) with
+    c' = (c + t_k) mod m and new image t'_k = floor((c + t_k) / m), other components
     unchanged; it is stored in the row of the smaller index (with the image and the
     tangential force negated when the pair is reversed). The rebuild before the next
     step matches these entries by partner and image, so every contact keeps its history.
     """
     n = b.n_particles
-    out = allocate(1, 2 * n, 2 * b.capacity)
+    out = allocate(1, m * n, m * b.capacity)
     scale = np.ones(3)
-    scale[k] = 2.0
+    scale[k] = m
     out.h[0] = b.h[r] * scale[None, :]
     out.h0[0] = b.h0[r] * scale[None, :]
     out.h_ref[0] = out.h[0]
-    s = b.s[r].copy()
-    s[:, k] *= 0.5
-    s1 = s.copy()
-    s1[:, k] += 0.5
-    out.s[0] = np.concatenate([s, s1])
+    copies = []
+    for c in range(m):
+        s = b.s[r].copy()
+        s[:, k] = (s[:, k] + c) / m
+        copies.append(s)
+    out.s[0] = np.concatenate(copies)
     out.s_ref[0] = out.s[0]
     for name in ("v", "w", "rot", "radius", "mass", "inertia", "force", "torque"):
-        getattr(out, name)[0] = np.concatenate([getattr(b, name)[r]] * 2)
+        getattr(out, name)[0] = np.concatenate([getattr(b, name)[r]] * m)
     for name in ("L", "stress", "stress_servo", "stiffness", "step_count", "unbalanced"):
         getattr(out, name)[0] = getattr(b, name)[r]
-    out.ncontact[0] = 2 * b.ncontact[r]
-    out.kinetic[0] = 2 * b.kinetic[r]
+    out.ncontact[0] = m * b.ncontact[r]
+    out.kinetic[0] = m * b.kinetic[r]
     out.need_rebuild[0] = 1
 
     cnt = b.nbr_count[r]
@@ -71,13 +78,12 @@ def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
     t = decode_shifts(b.nbr_shift[r][rows, slots])
     ft = b.ft[r][rows, slots]
     pair_a, pair_b, shifts, forces = [], [], [], []
-    for c in (0, 1):
+    for c in range(m):
         ck = c + t[:, k]
-        c2 = np.mod(ck, 2)
         tn = t.copy()
-        tn[:, k] = np.floor_divide(ck, 2)
+        tn[:, k] = np.floor_divide(ck, m)
         pair_a.append(rows + c * n)
-        pair_b.append(j + c2 * n)
+        pair_b.append(j + np.mod(ck, m) * n)
         shifts.append(tn)
         forces.append(ft)
     a = np.concatenate(pair_a)
@@ -90,7 +96,7 @@ def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
     f[swap] *= -1
     order = np.lexsort((bb, a))
     a, bb, t, f = a[order], bb[order], t[order], f[order]
-    counts = np.bincount(a, minlength=2 * n)
+    counts = np.bincount(a, minlength=m * n)
     if counts.max(initial=0) > out.capacity:
         out = grow_capacity(out, int(counts.max()))
     slot = np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
@@ -99,4 +105,3 @@ def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
     out.ft[0][a, slot] = f
     out.nbr_count[0] = counts
     return out
-
