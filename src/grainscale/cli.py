@@ -46,7 +46,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--checkpoint-every", type=_positive_int, default=None,
                      help="write a checkpoint every N steps (overrides the case file)")
     run.add_argument("--resume", action="store_true",
-                     help="continue from the latest checkpoint in --out")
+                     help="continue from the newest valid checkpoint in --out (one whose "
+                          "checksums fail is skipped for the previous one, with a "
+                          "warning); refused if a physics key of the case changed since")
+    run.add_argument("--allow-changed", nargs="+", default=None, metavar="KEY",
+                     help="with --resume: case keys (dotted, e.g. solver.gravity, or a "
+                          "table such as materials.soil) that may differ from the "
+                          "checkpoint's (time.end, title, solver.threads and "
+                          "output.frames, frame_interval and checkpoint_every may change "
+                          "without it; output.history never: docs/case-files.md)")
     run.add_argument("--threads", type=_positive_int, default=None,
                      help="numba threads per process (overrides solver.threads)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -124,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
             return run_case(args.case, args.out, max_steps=args.max_steps,
                             steps_this_run=args.steps_this_run,
                             checkpoint_every=args.checkpoint_every, resume=args.resume,
+                            allow_changed=args.allow_changed,
                             progress=not args.quiet, threads=args.threads, comm=comm)
         if args.command == "rve":
             from grainscale.dem import commands

@@ -16,6 +16,7 @@ import time
 import tomllib
 from pathlib import Path
 
+import h5py
 import meshio
 import numpy as np
 import pytest
@@ -158,11 +159,23 @@ def test_restart_under_mpi_on_any_rank_count(rve_case, serial, tmp_path):
     common = ["run", str(rve_case), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
     r = mpirun(2, [*common, "--max-steps", "9"])  # last checkpoint at step 8
     assert r.returncode == 0, r.stderr
-    parts = list((out / "checkpoint.parts").iterdir())
-    assert [p.name for p in parts] == ["0000000009_2"]  # the end-of-run one, older removed
-    assert len(list(parts[0].iterdir())) == 2  # one part per rank
+    parts = sorted((out / "checkpoint.parts").iterdir())
+    # the end-of-run one and the previous (the fallback), older ones removed
+    assert [p.name for p in parts] == ["0000000008_2", "0000000009_2"]
+    assert all(len(list(p.iterdir())) == 2 for p in parts)  # one part per rank
+    # rank 1's part of the newest damaged: rank 1 finds it, every rank falls back to step 8
+    bad = parts[1] / "rank_00001.h5"
+    with h5py.File(bad, "r") as f:
+        offset = f["points/x"].id.get_offset()
+    with open(bad, "r+b") as fh:
+        fh.seek(offset)
+        byte = fh.read(1)[0]
+        fh.seek(offset)
+        fh.write(bytes([byte ^ 0xFF]))
     r = mpirun(2, [*common, "--resume", "--steps-this-run", "4"])  # same rank count
     assert r.returncode == 0, r.stderr
+    assert f"warning: {bad}: array points/x does not match its checksum" in r.stderr
+    assert "previous checkpoint" in r.stderr and "(step 8," in r.stderr
     r = mpirun(3, [*common, "--resume"])  # and a different one
     assert r.returncode == 0, r.stderr
     assert (out / "history.csv").read_text() == serial

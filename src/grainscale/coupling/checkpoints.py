@@ -1,15 +1,23 @@
 """Checkpoints of a (possibly distributed) run: every rank writes its own part, rank 0
-commits them with a manifest.
+commits them with a manifest; a resume checks them and the case before using them.
 
 Layout in the output folder:
-    checkpoint.h5                       manifest: time, step, output counters, rank
-                                        count, the parts folder, the rigid body
+    checkpoint.h5                       manifest of the newest checkpoint: time, step,
+                                        output counters, rank count, the parts folder,
+                                        the rigid body, the case it was run with
+    checkpoint.prev.h5                  manifest of the one before: the fallback
     checkpoint.parts/STEP_N/rank_R.h5   one part per rank (N ranks): its points (with their
                                         global ids) and its materials' state (every
                                         RVE in full, with its contact history)
-Each file is written to a temporary name and renamed; the manifest is replaced only
-after every rank has finished its part, and older parts are deleted only after that, so
-a job killed at any moment leaves the previous checkpoint complete and valid.
+Every file carries checksums of its arrays and attributes (io/checkpoint.py). Each file
+is written to a temporary name and renamed; the manifest is replaced only after every
+rank has finished its part, the manifest it replaces becomes checkpoint.prev.h5, and
+only parts that neither manifest names are deleted, so a job killed at any moment, or a
+checkpoint damaged later, leaves a complete and valid earlier one.
+
+A resume (`find`) takes checkpoint.h5 if every checksum of it and its parts matches,
+else checkpoint.prev.h5 with a warning naming the bad file and why; it then compares
+the case the checkpoint was run with against the current one (`check_case`).
 
 Any number of ranks can resume a checkpoint: each rank reads from every part the rows
 of the points it owns (by global id). Results do not depend on the rank count, so a
@@ -18,18 +26,48 @@ resume on a different number of ranks continues the same history.
 
 from __future__ import annotations
 
+import difflib
+import json
+import os
 import shutil
+import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import h5py
 import numpy as np
 
 from grainscale.config.base import ConfigError
-from grainscale.io.checkpoint import read_checkpoint, write_checkpoint
+from grainscale.io.checkpoint import (
+    CorruptCheckpoint,
+    read_checkpoint,
+    verify_checkpoint,
+    write_checkpoint,
+)
 from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError
 
 MANIFEST = "checkpoint.h5"
+PREVIOUS = "checkpoint.prev.h5"
 PARTS = "checkpoint.parts"
+
+# Case keys (and tables) that may change on a resume without --allow-changed: they do
+# not change the physics of the steps already taken or to come. time.end: extending
+# or shortening a run is the normal use; the rest are performance, element tests
+# (`grainscale rve`, not this run) or outputs that do not touch history.csv.
+FREE = ("title", "time.end", "solver.threads", "solver.partition_seed",
+        "solver.rebalance_every", "output.frames", "output.frame_interval",
+        "output.checkpoint_every", "triaxial", "undrained", "isotropic", "shear")
+# Keys that can never change on a resume: history.csv keeps the columns of its header.
+FIXED = ("output.history",)
+
+
+class Checkpoint(NamedTuple):
+    """A checkpoint whose files were all verified: its manifest, the manifest's
+    attributes and arrays, and the case (as case_record) it was run with."""
+    manifest: Path
+    attrs: dict
+    groups: dict
+    case: dict
 
 
 def _material_ids(s: MPMState, i: int) -> np.ndarray:
@@ -46,8 +84,16 @@ def rank_state(s: MPMState) -> dict[str, dict[str, np.ndarray]]:
     return groups
 
 
-def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
-    """Write this rank's part, then (rank 0) the manifest; collective."""
+def save(out: Path, s: MPMState, counters: dict[str, int], case: dict,
+         previous: Path | None) -> None:
+    """Write this rank's part, then (rank 0) the manifest; collective.
+
+    `case` is the case_record() of the run. `previous` is the manifest of this run's
+    last valid checkpoint (the one it resumed from, or last wrote): it is kept as
+    checkpoint.prev.h5, the fallback of a resume. None (a new run) removes an older run's
+    checkpoint.prev.h5, which the new history.csv no longer matches. A file that cannot
+    be written stops the run (SimulationError on every rank) and keeps the previous
+    checkpoint."""
     # the rank count is in the name: a resume on other ranks that saves at the same step
     # must not overwrite the parts the current manifest still names
     folder = out / PARTS / f"{s.step:010d}_{s.comm.size}"
@@ -57,24 +103,54 @@ def save(out: Path, s: MPMState, counters: dict[str, int]) -> None:
         write_checkpoint(folder / f"rank_{s.comm.rank:05d}.h5", rank_state(s),
                          {"step": s.step})
     except OSError as err:
-        error = err
-    if s.comm.any(error is not None):  # keep the previous checkpoint
-        if error is not None:
-            raise SimulationError(f"writing checkpoint part {folder}: {error}") from None
-        raise RemoteFailure("another rank could not write its checkpoint part")
+        error = f"writing checkpoint part {folder}: {err}"
+    _stop_if_any(s.comm, error)
     if s.comm.root:
-        groups = {}
-        if s.rigid is not None:
-            groups["rigid"] = {"x": s.rigid.x, "displacement": s.rigid.displacement,
-                               "force": s.rigid.force}
-        attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "last_dt": s.last_dt,
-                 "ranks": s.comm.size,
-                 "parts": f"{PARTS}/{folder.name}", **counters}
-        write_checkpoint(out / MANIFEST, groups, attrs)
-        for old in (out / PARTS).iterdir():  # superseded parts
-            if old.name != folder.name:
-                shutil.rmtree(old, ignore_errors=True)
+        try:
+            _commit(out, s, folder, counters, case, previous)
+        except OSError as err:
+            error = f"writing checkpoint {out / MANIFEST}: {err}"
+    _stop_if_any(s.comm, error)
     s.comm.barrier()  # no rank runs ahead into a new part while rank 0 cleans up
+
+
+def _stop_if_any(comm, error: str | None) -> None:
+    if comm.any(error is not None):
+        if error is not None:
+            raise SimulationError(error) from None
+        raise RemoteFailure("another rank could not write its checkpoint")
+
+
+def _commit(out: Path, s: MPMState, folder: Path, counters: dict, case: dict,
+            previous: Path | None) -> None:
+    """Rank 0: rotate the manifests, write the new one, delete parts neither names."""
+    manifest, prev = out / MANIFEST, out / PREVIOUS
+    if previous is None:
+        prev.unlink(missing_ok=True)
+    elif previous == manifest and manifest.is_file():
+        os.replace(manifest, prev)
+    # else previous is prev: checkpoint.h5 is the bad one a resume fell back from
+    groups = {"case": {"json": np.frombuffer(json.dumps(case, sort_keys=True).encode(),
+                                             dtype=np.uint8)}}
+    if s.rigid is not None:
+        groups["rigid"] = {"x": s.rigid.x, "displacement": s.rigid.displacement,
+                           "force": s.rigid.force}
+    attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "last_dt": s.last_dt,
+             "ranks": s.comm.size, "parts": f"{PARTS}/{folder.name}", **counters}
+    write_checkpoint(manifest, groups, attrs)
+    keep = {folder.name, _parts_name(prev)}
+    for old in (out / PARTS).iterdir():
+        if old.name not in keep:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def _parts_name(manifest: Path) -> str | None:
+    """The parts folder a manifest names (None if there is no readable manifest)."""
+    try:
+        with h5py.File(manifest, "r") as f:
+            return Path(str(f.attrs["parts"])).name
+    except Exception:
+        return None
 
 
 def rows_of(group, wanted: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -116,35 +192,160 @@ def load_rows(s: MPMState, sources) -> bool:
     return True
 
 
-def restore(out: Path, s: MPMState) -> dict:
-    """Load the latest checkpoint into s (the rows this rank owns); returns the
+def find(out: Path, comm) -> Checkpoint:
+    """The newest valid checkpoint in `out`: checkpoint.h5, else checkpoint.prev.h5.
+
+    Valid: the manifest and every part exist, every checksum in them matches and every
+    part is from the manifest's step. A checkpoint that is not valid is skipped with a
+    warning on stderr naming the file and why; ConfigError if none is valid.
+    Collective: each rank checks a share of the parts and the ranks agree."""
+    problems = []
+    for manifest in (out / MANIFEST, out / PREVIOUS):
+        found, problem = _check(out, manifest, comm)
+        if found is not None:
+            if problems and comm.root:
+                print(f"grainscale: warning: {'; '.join(problems)}: resuming from the "
+                      f"previous checkpoint {manifest} (step {found.attrs['step']}, t = "
+                      f"{found.attrs['time']:.6g} s)", file=sys.stderr)
+            return found
+        problems.append(problem)
+    if not any(p.is_file() for p in (out / MANIFEST, out / PREVIOUS)):
+        raise ConfigError(f"--resume: no checkpoint {str(out / MANIFEST)!r} to resume from")
+    raise ConfigError(f"--resume: no valid checkpoint in {out}:\n"
+                      + "\n".join(f"  {p}" for p in problems))
+
+
+def _check(out: Path, manifest: Path, comm) -> tuple[Checkpoint | None, str | None]:
+    problem = found = None
+    try:
+        groups, attrs = read_checkpoint(manifest)
+        folder = out / str(attrs["parts"])
+        for r in range(comm.rank, int(attrs["ranks"]), comm.size):
+            part = folder / f"rank_{r:05d}.h5"
+            step = verify_checkpoint(part).get("step")
+            if step != attrs["step"]:
+                raise CorruptCheckpoint(f"{part}: from step {step}, its manifest {manifest} "
+                                        f"is at step {attrs['step']}")
+        case = json.loads(bytes(groups["case"]["json"]).decode())
+        found = Checkpoint(manifest, attrs, groups, case)
+    except CorruptCheckpoint as err:
+        problem = str(err)
+    except (KeyError, ValueError) as err:  # a valid file without what a manifest holds
+        problem = f"{manifest}: not a complete checkpoint manifest ({err!r} is missing)"
+    problems = comm.gather(problem)
+    problem = comm.bcast(next((p for p in problems if p), None) if comm.root else None)
+    return (None, problem) if problem else (found, None)
+
+
+def restore(found: Checkpoint, s: MPMState) -> dict:
+    """Load a checkpoint (from find) into s: the rows this rank owns; returns the
     manifest's attributes. Collective: every rank reads alone, then the ranks agree on
     whether all found their points, so an error is raised on every rank or none."""
-    groups, attrs = read_checkpoint(out / MANIFEST)
+    out, attrs = found.manifest.parent, found.attrs
     folder = out / str(attrs["parts"])
     files = [folder / f"rank_{r:05d}.h5" for r in range(int(attrs["ranks"]))]
-    missing = [f for f in files if not f.is_file()]
-    if missing:
-        raise ConfigError(f"{out / MANIFEST}: checkpoint part {missing[0]} is missing")
     handles = [h5py.File(path, "r") for path in files]
     try:
-        for path, f in zip(files, handles, strict=True):
-            if f.attrs["step"] != attrs["step"]:
-                raise ConfigError(f"{path}: from step {f.attrs['step']}, the manifest is "
-                                  f"at step {attrs['step']}")
         complete = load_rows(s, handles)
+    except KeyError as err:  # every rank alike: the same materials read the same files
+        raise ConfigError(f"{found.manifest}: the checkpoint holds no state {err} for the "
+                          "materials this case builds; was a material's type changed?"
+                          ) from None
     finally:
         for f in handles:
             f.close()
     if s.comm.any(not complete):
-        raise ConfigError(f"{out / MANIFEST}: the checkpoint does not hold the points this "
+        raise ConfigError(f"{found.manifest}: the checkpoint does not hold the points this "
                           "case builds; was the case file changed?")
     if s.rigid is not None:
-        s.rigid.x[...] = groups["rigid"]["x"]
-        s.rigid.displacement[...] = groups["rigid"]["displacement"]
-        s.rigid.force[...] = groups["rigid"]["force"]
+        rigid = found.groups.get("rigid")
+        if rigid is None or rigid["x"].shape != s.rigid.x.shape:
+            raise ConfigError(f"{found.manifest}: the checkpoint does not hold the rigid "
+                              "body this case builds; was the case file changed?")
+        s.rigid.x[...] = rigid["x"]
+        s.rigid.displacement[...] = rigid["displacement"]
+        s.rigid.force[...] = rigid["force"]
     s.time = float(attrs["time"])
     s.step = int(attrs["step"])
     s.vmax = float(attrs["vmax"])
     s.last_dt = float(attrs.get("last_dt", 0.0))
     return attrs
+
+
+# --------------------------------------------------------------------------- the case
+def case_record(case) -> dict:
+    """The validated case as plain JSON data (every default filled in), as stored in a
+    checkpoint. Take it before the run sets values (a "dem" material's density)."""
+    return json.loads(json.dumps(case.model_dump(mode="json")))
+
+
+def flat_keys(data, key: str = "") -> dict:
+    """{dotted key: value} of case data, keys as in the case file: `solver.gravity`,
+    `materials.soil.youngs_modulus`, `bodies[0].lo`. Lists of numbers are values."""
+    if isinstance(data, dict):
+        out = {}
+        for k, v in data.items():
+            out.update(flat_keys(v, f"{key}.{k}" if key else k))
+        return out
+    if isinstance(data, list) and any(isinstance(v, dict) for v in data):
+        out = {}
+        for i, v in enumerate(data):
+            out.update(flat_keys(v, f"{key}[{i}]"))
+        return out
+    return {key: data}
+
+
+def _covers(name: str, key: str) -> bool:
+    """`name` is the key itself or a table holding it."""
+    return key == name or key.startswith((name + ".", name + "["))
+
+
+_ABSENT = object()
+
+
+def _show(v) -> str:
+    return "(absent)" if v is _ABSENT else repr(v)
+
+
+def changed_keys(old: dict, new: dict) -> list[tuple[str, object, object]]:
+    """(key, old value, new value) of every key that differs between two case records,
+    the FREE keys left out; a key present on one side only has the value _ABSENT."""
+    a, b = flat_keys(old), flat_keys(new)
+    return [(k, a.get(k, _ABSENT), b.get(k, _ABSENT)) for k in dict.fromkeys([*b, *a])
+            if a.get(k, _ABSENT) != b.get(k, _ABSENT)
+            and not any(_covers(f, k) for f in FREE)]
+
+
+def check_case(found: Checkpoint, case: dict, allowed: list[str]) -> None:
+    """Refuse to resume a checkpoint run with other physics than the current case.
+
+    Every key that differs between the case stored in the checkpoint and `case` (both
+    case_record()s), except the FREE ones, must be named in `allowed` (--allow-changed;
+    a table such as `materials.soil` names all its keys); FIXED keys can never change.
+    Every name in `allowed` must be a key (or table) of one of the two cases. Raises
+    ConfigError listing each refused key with its old and new value."""
+    keys = [*flat_keys(found.case), *flat_keys(case)]
+    for name in allowed:
+        if not any(_covers(name, k) for k in keys):
+            close = difflib.get_close_matches(name, sorted(set(keys)), n=3)
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise ConfigError(f"--allow-changed {name}: not a key of this case{hint}; valid: "
+                              "a dotted key as the case file spells it (solver.gravity, "
+                              "materials.NAME.youngs_modulus, bodies[0].lo) or a table "
+                              "(materials.NAME)")
+    changed = changed_keys(found.case, case)
+    fixed = [k for k, _, _ in changed if any(_covers(f, k) for f in FIXED)]
+    if fixed:
+        raise ConfigError(f"--resume: {', '.join(fixed)} changed since the checkpoint "
+                          f"{found.manifest} was written, and cannot: history.csv keeps the "
+                          "columns of its header; restore it, or start a new run in another "
+                          "--out folder")
+    refused = [c for c in changed if not any(_covers(n, c[0]) for n in allowed)]
+    if refused:
+        lines = "\n".join(f"  {k} = {_show(o)} -> {_show(n)}" for k, o, n in refused)
+        raise ConfigError(
+            f"--resume: the case no longer matches the checkpoint {found.manifest}; these "
+            f"keys changed since it was written (checkpoint -> case file):\n{lines}\n"
+            "the resumed run would not continue the same physics: restore them, start a "
+            "new run in another --out folder, or resume anyway with --resume "
+            f"--allow-changed {' '.join(k for k, _, _ in refused)}")

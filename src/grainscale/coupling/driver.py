@@ -5,7 +5,9 @@ Outputs in --out: `case.resolved.toml` (every default filled in, package version
 `frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
 for a rigid body), `cost.json` (time per step split into MPM, DEM, communication,
 waiting and other), and a checkpoint (coupling/checkpoints.py) every N steps and at the
-end of the run when checkpointing is on. `--resume` continues from it: history rows and
+end of the run when checkpointing is on. `--resume` continues from the newest valid one
+(a damaged one is skipped with a warning) if the case still has its physics
+(checkpoints.check_case; --allow-changed names keys that may differ): history rows and
 frames written after it are dropped, so the continued run writes the same history.csv
 as an uninterrupted one.
 
@@ -139,6 +141,7 @@ def prepare_materials(case: Case, case_dir: Path, out: Path, comm: Comm, progres
 def run_case(case_path, out, *, max_steps: int | None = None,
              steps_this_run: int | None = None,
              checkpoint_every: int | None = None, resume: bool = False,
+             allow_changed: list[str] | None = None,
              progress: bool = True, threads: int | None = None,
              comm: Comm | None = None) -> int:
     """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error).
@@ -146,22 +149,28 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     max_steps ends the run at that step of the whole run (counted from time.start, as
     time.end is a time of the whole run), so the same command given again with
     `resume` after any stop ends at the same step; steps_this_run caps the steps taken
-    by this call alone (a per-job budget).
+    by this call alone (a per-job budget). `resume` continues from the newest valid
+    checkpoint in `out` if its case matches, but for the keys named in allow_changed.
     Input errors are raised as ConfigError, on every rank alike (the checks after the
     ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
     case_path = Path(case_path)
     out = Path(out)
     case = load_case(case_path)
+    record = checkpoints.case_record(case)  # before the run fills in values
     set_threads(case, threads, comm)
     every = checkpoint_every if checkpoint_every is not None else case.output.checkpoint_every
-    if resume and not (out / checkpoints.MANIFEST).is_file():
-        raise ConfigError(f"--resume: no checkpoint {str(out / checkpoints.MANIFEST)!r} to "
-                          "resume from")
+    if allow_changed and not resume:
+        raise ConfigError(f"--allow-changed {' '.join(allow_changed)}: applies only with "
+                          "--resume (it names case keys that may differ from the checkpoint's)")
+    found = None
+    if resume:  # collective: every rank gets the same checkpoint, or the same error
+        found = checkpoints.find(out, comm)
+        checkpoints.check_case(found, record, list(allow_changed or []))
     check_geometry(case, case_path.parent)  # every input check before long computations
     try:
-        return _run(case, case_path, out, comm, max_steps, steps_this_run, every, resume,
-                    progress)
+        return _run(case, record, case_path, out, comm, max_steps, steps_this_run, every,
+                    found, progress)
     except ConfigError:
         raise  # raised by every rank (see above): printed once by rank 0
     except BaseException:
@@ -173,8 +182,9 @@ def run_case(case_path, out, *, max_steps: int | None = None,
         raise
 
 
-def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, steps_this_run,
-         every: int, resume: bool, progress: bool) -> int:
+def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_steps,
+         steps_this_run, every: int, found: checkpoints.Checkpoint | None,
+         progress: bool) -> int:
     root = comm.root
     progress = progress and root
     factory = prepare_materials(case, case_path.parent, out, comm, progress)
@@ -192,8 +202,9 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, steps_th
     t0, t_end = case.time.start, case.time.end
     frame_dt = o.frame_interval or o.interval
     history = pvd = rigid_pvd = None
+    resume = found is not None
     if resume:
-        c = checkpoints.restore(out, s)
+        c = checkpoints.restore(found, s)
         # output slots (a step can span several intervals) and what was actually written
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
         last_row_step = int(c.get("last_row_step", -1))
@@ -235,6 +246,13 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, steps_th
         return {"rows": n_rows, "frames": n_frames, "last_row_step": last_row_step,
                 **written}
 
+    previous = found.manifest if resume else None  # this run's last valid checkpoint
+
+    def save() -> None:
+        nonlocal previous, saved_step
+        checkpoints.save(out, s, counters(), record, previous)
+        previous, saved_step = out / checkpoints.MANIFEST, s.step
+
     def due(n_done: int, interval: float) -> bool:
         return s.time >= t0 + n_done * interval - 1e-9 * interval
 
@@ -262,8 +280,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, steps_th
                 while due(n_frames, frame_dt):
                     n_frames += 1
             if every and s.step % every == 0 and s.step > 0 and steps_run > 0:
-                checkpoints.save(out, s, counters())
-                saved_step = s.step
+                save()
             if (s.time >= t_end - 1e-12 * (t_end - t0)
                     or (max_steps is not None and s.step >= max_steps)
                     or (steps_this_run is not None and steps_run >= steps_this_run)):
@@ -291,7 +308,7 @@ def _run(case: Case, case_path: Path, out: Path, comm: Comm, max_steps, steps_th
                            "imbalance_after_last": moved["after"]}
             bar.update(dt, s.step)
         if every and saved_step != s.step:  # before the final row: a resume drops it
-            checkpoints.save(out, s, counters())
+            save()
     except SimulationError as err:
         if not isinstance(err, RemoteFailure):  # the rank that failed reports the cause
             print(f"grainscale: error: {err}", file=sys.stderr)

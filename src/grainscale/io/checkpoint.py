@@ -1,37 +1,118 @@
-"""HDF5 checkpoints, written atomically.
+"""HDF5 checkpoint files, written atomically and checked when read.
 
 Layout: groups of arrays (`groups[name][key] -> ndarray`) and scalar attributes on the
-root. Written to `<name>.tmp.h5`, flushed and fsync'ed, then renamed onto the final name,
-so an interrupted write never destroys the previous checkpoint.
+root. Every array carries the SHA-256 of its dtype, shape and bytes (its `sha256`
+attribute) and the root the SHA-256 of the other root attributes (`attrs_sha256`), so
+reading detects a changed byte in the data or in the attributes. A truncated file, or
+one whose HDF5 structure is damaged, fails to open or to read in h5py. Every such
+problem, and a file without checksums, is raised as CorruptCheckpoint naming the file
+and the array.
+
+Written to `<name>.tmp.h5`, flushed and fsync'ed, then renamed onto the final name and
+the folder fsync'ed, so an interrupted write never destroys the previous file.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+ATTRS_DIGEST = "attrs_sha256"
+
+
+class CorruptCheckpoint(Exception):
+    """A checkpoint file is missing, unreadable, or does not match its checksums."""
+
+
+def array_digest(a: np.ndarray) -> str:
+    """SHA-256 of an array's dtype, shape and bytes (hex)."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes() if a.ndim == 0 else a.data)
+    return h.hexdigest()
+
+
+def _plain(v):
+    return v.item() if hasattr(v, "item") else v
+
+
+def attrs_digest(attrs: dict) -> str:
+    """SHA-256 of scalar attributes (numbers, strings), independent of their order."""
+    text = json.dumps({k: _plain(v) for k, v in attrs.items()}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _fsync_dir(folder: Path) -> None:
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
 
 def write_checkpoint(path: str | Path, groups: dict[str, dict[str, np.ndarray]],
                      attrs: dict[str, float | int | str]) -> None:
+    """Write arrays and attributes with their checksums to `path`, atomically."""
     path = Path(path)
     tmp = path.with_name(path.stem + ".tmp.h5")
     with h5py.File(tmp, "w") as f:
-        for k, v in attrs.items():
+        plain = {k: _plain(v) for k, v in attrs.items()}
+        for k, v in plain.items():
             f.attrs[k] = v
+        f.attrs[ATTRS_DIGEST] = attrs_digest(plain)
         for g, arrays in groups.items():
             grp = f.create_group(g)
             for k, a in arrays.items():
-                grp.create_dataset(k, data=np.asarray(a))
+                a = np.asarray(a)
+                grp.create_dataset(k, data=a).attrs["sha256"] = array_digest(a)
         f.flush()
         os.fsync(f.id.get_vfd_handle())
     os.replace(tmp, path)
+    _fsync_dir(path.parent)
+
+
+def _read(path: Path, keep: bool) -> tuple[dict[str, dict[str, np.ndarray]], dict]:
+    if not path.is_file():
+        raise CorruptCheckpoint(f"{path}: missing")
+    try:
+        with h5py.File(path, "r") as f:
+            attrs = {k: _plain(v) for k, v in f.attrs.items()}
+            stored = attrs.pop(ATTRS_DIGEST, None)
+            if stored is None:
+                raise CorruptCheckpoint(f"{path}: no checksums (damaged, or written by a "
+                                        "grainscale from before checkpoints had them)")
+            if stored != attrs_digest(attrs):
+                raise CorruptCheckpoint(f"{path}: its attributes do not match their checksum")
+            groups = {}
+            for g in f:
+                for k in f[g]:
+                    ds = f[g][k]
+                    a = ds[()]
+                    want = ds.attrs.get("sha256")
+                    if want is None or array_digest(a) != _plain(want):
+                        raise CorruptCheckpoint(f"{path}: array {g}/{k} does not match its "
+                                                "checksum")
+                    if keep:
+                        groups.setdefault(g, {})[k] = a
+    except CorruptCheckpoint:
+        raise
+    except Exception as err:  # truncated, or damaged HDF5 structure: h5py's many errors
+        raise CorruptCheckpoint(f"{path}: unreadable ({type(err).__name__}: {err})") from None
+    return groups, attrs
 
 
 def read_checkpoint(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]], dict]:
-    with h5py.File(path, "r") as f:
-        attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
-        groups = {g: {k: f[g][k][()] for k in f[g]} for g in f}
-    return groups, attrs
+    """The groups of arrays and the attributes of a checkpoint file, every checksum
+    verified; CorruptCheckpoint if it is missing, unreadable or does not match."""
+    return _read(Path(path), keep=True)
+
+
+def verify_checkpoint(path: str | Path) -> dict:
+    """Check every checksum of a checkpoint file (reading one array at a time); returns
+    its attributes. CorruptCheckpoint as read_checkpoint."""
+    return _read(Path(path), keep=False)[1]

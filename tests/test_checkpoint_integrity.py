@@ -1,0 +1,217 @@
+"""Checkpoints that check themselves: checksums, the fallback to the previous checkpoint,
+and a resume refused when the case's physics changed (issue 13, item 2)."""
+
+import shutil
+import textwrap
+
+import h5py
+import numpy as np
+import pytest
+
+from grainscale.cli import main
+from grainscale.io.checkpoint import CorruptCheckpoint, read_checkpoint, write_checkpoint
+from test_cli_run import CASE
+
+
+def _case(path, text=None):
+    path.write_text(textwrap.dedent(CASE) if text is None else text)
+    return path
+
+
+def _changed(tmp_path, old: str, new: str, name="changed.toml"):
+    text = textwrap.dedent(CASE)
+    assert text.count(old) == 1, old
+    return _case(tmp_path / name, text.replace(old, new))
+
+
+def _run(case, out, *extra):
+    return main(["run", str(case), "--out", str(out), "--checkpoint-every", "10", "--quiet",
+                 *extra])
+
+
+def _flip_byte(path, array: str) -> None:
+    """Invert one byte inside the stored data of `array` (group/key) of an HDF5 file."""
+    with h5py.File(path, "r") as f:
+        offset = f[array].id.get_offset()
+    with open(path, "r+b") as fh:
+        fh.seek(offset + 5)
+        b = fh.read(1)[0]
+        fh.seek(offset + 5)
+        fh.write(bytes([b ^ 0xFF]))
+
+
+def _truncate(path) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def _newest_part(out):
+    with h5py.File(out / "checkpoint.h5", "r") as f:
+        return out / str(f.attrs["parts"]) / "rank_00000.h5"
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """An uninterrupted run, and the same run stopped at step 25: checkpoints at steps
+    20 (checkpoint.prev.h5) and 25 (checkpoint.h5)."""
+    tmp = tmp_path_factory.mktemp("ref")
+    case = _case(tmp / "case.toml")
+    assert _run(case, tmp / "full") == 0
+    assert _run(case, tmp / "part", "--max-steps", "25") == 0
+    return case, tmp / "full", tmp / "part"
+
+
+@pytest.fixture
+def stopped(reference, tmp_path):
+    """A fresh copy of the run stopped at step 25."""
+    case, _, part = reference
+    out = tmp_path / "part"
+    shutil.copytree(part, out)
+    return case, out
+
+
+def test_every_array_and_attribute_is_checked(tmp_path):
+    path = tmp_path / "c.h5"
+    groups = {"points": {"x": np.arange(12.0).reshape(4, 3), "flag": np.ones(4, bool)},
+              "empty": {"a": np.zeros((0, 3))}}
+    write_checkpoint(path, groups, {"time": 0.25, "step": 7, "parts": "p"})
+    g, attrs = read_checkpoint(path)
+    assert attrs == {"time": 0.25, "step": 7, "parts": "p"}
+    assert np.array_equal(g["points"]["x"], groups["points"]["x"])
+    _flip_byte(path, "points/x")
+    with pytest.raises(CorruptCheckpoint, match="points/x does not match its checksum"):
+        read_checkpoint(path)
+    write_checkpoint(path, groups, {"time": 0.25, "step": 7})
+    with h5py.File(path, "r+") as f:
+        f.attrs["step"] = 8  # as a damaged attribute would read
+    with pytest.raises(CorruptCheckpoint, match="attributes do not match"):
+        read_checkpoint(path)
+    write_checkpoint(path, groups, {"step": 7})
+    _truncate(path)
+    with pytest.raises(CorruptCheckpoint, match="unreadable"):
+        read_checkpoint(path)
+
+
+@pytest.mark.parametrize("damage", ["part byte", "part truncated", "manifest byte",
+                                    "manifest truncated", "manifest missing"])
+def test_damaged_newest_checkpoint_falls_back_to_the_previous(damage, reference, stopped,
+                                                              capsys):
+    """The newest checkpoint (step 25) damaged: the resume warns, naming the file and why,
+    continues from the previous one (step 20), and history.csv and frames.pvd end
+    byte-identical to an uninterrupted run's."""
+    _, full, _ = reference
+    case, out = stopped
+    part, manifest = _newest_part(out), out / "checkpoint.h5"
+    bad = part if damage.startswith("part") else manifest
+    if damage.endswith("byte"):
+        _flip_byte(bad, "points/x" if bad == part else "rigid/x")
+    elif damage.endswith("truncated"):
+        _truncate(bad)
+    else:
+        bad.unlink()  # as a kill between the renames of a save leaves it
+    capsys.readouterr()
+    assert _run(case, out, "--resume") == 0
+    err = capsys.readouterr().err
+    why = {"byte": "does not match its checksum", "truncated": "unreadable",
+           "missing": "missing"}[damage.split()[1]]
+    assert f"warning: {bad}: " in err and why in err, err
+    assert f"previous checkpoint {out / 'checkpoint.prev.h5'} (step 20" in err
+    assert (out / "history.csv").read_bytes() == (full / "history.csv").read_bytes()
+    assert (out / "frames.pvd").read_bytes() == (full / "frames.pvd").read_bytes()
+    # the continued run wrote valid checkpoints over the damaged one: no warning now
+    assert _run(case, out, "--resume") == 0
+    assert "warning" not in capsys.readouterr().err
+    assert (out / "history.csv").read_bytes() == (full / "history.csv").read_bytes()
+
+
+def test_a_save_keeps_the_previous_checkpoint(stopped):
+    _, out = stopped
+    with h5py.File(out / "checkpoint.h5", "r") as new, \
+            h5py.File(out / "checkpoint.prev.h5", "r") as old:
+        assert (new.attrs["step"], old.attrs["step"]) == (25, 20)
+        names = {new.attrs["parts"], old.attrs["parts"]}
+    assert {f"checkpoint.parts/{p.name}" for p in (out / "checkpoint.parts").iterdir()} == names
+
+
+def test_no_valid_checkpoint_is_an_error(stopped, capsys):
+    case, out = stopped
+    _flip_byte(_newest_part(out), "points/x")
+    _truncate(out / "checkpoint.prev.h5")
+    history = (out / "history.csv").read_bytes()
+    assert _run(case, out, "--resume") == 2
+    err = capsys.readouterr().err
+    assert "no valid checkpoint" in err
+    assert "rank_00000.h5: array points/x does not match its checksum" in err
+    assert f"{out / 'checkpoint.prev.h5'}: unreadable" in err
+    assert (out / "history.csv").read_bytes() == history  # nothing touched
+
+
+def test_changed_physics_is_refused_unless_allowed(stopped, tmp_path, capsys):
+    case, out = stopped
+    changed = _changed(tmp_path, "youngs_modulus = 1e6", "youngs_modulus = 2e6")
+    text = changed.read_text().replace("gravity = [0.0, 0.0, -9.81]",
+                                       "gravity = [0.0, 0.0, -5.0]")
+    changed.write_text(text)
+    history = (out / "history.csv").read_bytes()
+    manifest = (out / "checkpoint.h5").read_bytes()
+    assert _run(changed, out, "--resume") == 2
+    err = capsys.readouterr().err
+    assert "solver.gravity = [0.0, 0.0, -9.81] -> [0.0, 0.0, -5.0]" in err
+    assert "materials.soil.youngs_modulus = 1000000.0 -> 2000000.0" in err
+    assert "--allow-changed solver.gravity materials.soil.youngs_modulus" in err
+    assert (out / "history.csv").read_bytes() == history  # nothing touched
+    assert (out / "checkpoint.h5").read_bytes() == manifest
+    # one of the two allowed is not enough
+    assert _run(changed, out, "--resume", "--allow-changed", "solver.gravity") == 2
+    err = capsys.readouterr().err
+    assert "youngs_modulus" in err and "solver.gravity =" not in err
+    # both (a table names all its keys)
+    assert _run(changed, out, "--resume", "--allow-changed", "solver.gravity",
+                "materials.soil") == 0
+    rows = (out / "history.csv").read_text().splitlines()
+    assert rows[-1].split(",")[1] == "0.03"
+    # the checkpoints now hold the new case: the same command resumes without the flag
+    assert _run(changed, out, "--resume") == 0
+    assert (out / "history.csv").read_text().splitlines() == rows
+
+
+def test_time_end_and_outputs_may_change(tmp_path, stopped):
+    """Extending a run is the normal use: a longer time.end (and no frames, checkpoints
+    more often) resumes without a flag and continues as if it had been given from the
+    start."""
+    case, out = stopped
+    longer = _changed(tmp_path, "end = 0.03", "end = 0.04")
+    ref = tmp_path / "ref"
+    assert _run(longer, ref) == 0
+    text = longer.read_text().replace("checkpoint_every = 0", "checkpoint_every = 7\n"
+                                      "frames = false")
+    longer.write_text(text)
+    assert main(["run", str(longer), "--out", str(out), "--quiet", "--resume"]) == 0
+    assert (out / "history.csv").read_bytes() == (ref / "history.csv").read_bytes()
+
+
+def test_output_history_cannot_change(tmp_path, stopped, capsys):
+    _, out = stopped
+    changed = _changed(tmp_path, '"rigid_depth", "force"]', '"rigid_depth"]')
+    assert _run(changed, out, "--resume", "--allow-changed", "output.history") == 2
+    err = capsys.readouterr().err
+    assert "output.history changed" in err and "columns" in err
+
+
+def test_allow_changed_names_keys_of_the_case(stopped, capsys):
+    case, out = stopped
+    assert _run(case, out, "--resume", "--allow-changed", "solver.gravty") == 2
+    err = capsys.readouterr().err
+    assert "--allow-changed solver.gravty: not a key of this case" in err
+    assert "did you mean solver.gravity" in err
+    # a key of the case that did not change is accepted (a job script may keep it)
+    assert _run(case, out, "--resume", "--allow-changed", "solver.gravity") == 0
+
+
+def test_allow_changed_needs_resume(tmp_path, capsys):
+    case = _case(tmp_path / "case.toml")
+    out = tmp_path / "o"
+    assert _run(case, out, "--allow-changed", "solver.gravity") == 2
+    assert "--allow-changed solver.gravity: applies only with --resume" in (
+        capsys.readouterr().err)
+    assert not out.exists()
