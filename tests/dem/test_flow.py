@@ -101,7 +101,7 @@ def test_flow_command_measures_a_rate_dependent_friction(tmp_path, capsys):
     for (the servo holds sigma_n within its band), the friction and the porosity both
     rise with I by more than their 95 % bands (dense flow's two signatures, GDR MiDi
     2004), and the fitted table is a valid mu_i material that reproduces the measured
-    mu_p at the fastest rate within its band."""
+    mu = tau/sigma_n at the fastest rate within its band."""
     case = tmp_path / "rve.toml"
     case.write_text(SMALL)
     out = tmp_path / "flow.csv"
@@ -118,8 +118,8 @@ def test_flow_command_measures_a_rate_dependent_friction(tmp_path, capsys):
     assert fast["porosity"] - fast["porosity_err"] > slow["porosity"] + slow["porosity_err"]
     table = tomllib.loads(out.with_suffix(".mu_i.toml").read_text())["materials"]["rve_fit"]
     mat = MuICfg(**table)
-    mu_fast = mat.mu_s + (mat.mu_2 - mat.mu_s) / (mat.I_0 / fast["I_p"] + 1)
-    assert mu_fast == pytest.approx(fast["mu_p"], abs=2 * fast["mu_p_err"])
+    mu_fast = mat.mu_s + (mat.mu_2 - mat.mu_s) / (mat.I_0 / fast["I"] + 1)
+    assert mu_fast == pytest.approx(fast["mu"], abs=2 * fast["mu_err"])
     assert (tmp_path / "flow.png").stat().st_size > 0
 
 

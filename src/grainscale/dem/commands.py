@@ -201,8 +201,8 @@ def run_flow(case: RVECase, args: argparse.Namespace) -> int:
               f"mu_2 = {f['mu_2']:.4f}, I_0 = {f['I_0']:.4g} (rms {f['rms']:.3g} bands"
               f"{bound})")
     if fits:
-        slowest = int(np.argmin(col["I_p"]))
-        table = flow.mu_i_table(args.material, fits["mu_p"], params, d,
+        slowest = int(np.argmin(col["I"]))
+        table = flow.mu_i_table(args.material, fits["mu"], params, d,
                                 float(col["porosity"][slowest]), young, str(args.params))
         path = args.out.with_suffix(".mu_i.toml")
         path.write_text(table)

@@ -9,15 +9,22 @@ Phys. Rev. E 72:021309):
     mu = tau / P                                effective friction [-]
     mu(I) = mu_s + (mu_2 - mu_s) / (I_0 / I + 1)     (Jop, Forterre & Pouliquen 2006)
 
-Two pressure measures are reported, because they differ in a DEM cell whose normal
-stresses are not equal:
+Two measures are reported, because they differ in a DEM cell whose normal stresses are
+not equal:
 
 - the shear-cell measure, P = sigma_n (the servo-held normal stress on the shear plane,
   sigma_zz) and tau = tau_xz: `mu`, `I` (what experiments and DEM studies report);
-- the continuum measure of the `mu_i` MPM material (mpm/materials/mu_i.py), P = p (mean
-  stress) and tau = sqrt(s:s/2) = q/sqrt(3): `mu_p`, `I_p`. The fitted `[materials.X]`
-  table uses this one, so that a continuum carrying it reproduces the RVE's stress
-  invariants in the same simple shear.
+- the invariant measure, P = p (mean stress) and tau = sqrt(s:s/2) = q/sqrt(3): `mu_p`,
+  `I_p`.
+
+The fitted `[materials.X]` table is the shear-cell fit. The `mu_i` material
+(mpm/materials/mu_i.py) flows with a deviator coaxial with its strain rate, so in simple
+shear its only deviator is s_xz: it carries tau_xz / sigma_n = sqrt(s:s/2) / p. The
+grains carry normal-stress differences as well (sqrt(s:s/2)/p is 10-30 % above
+tau/sigma_n, docs/validation.md §2.2), which resist no shearing on the shear plane; a
+continuum given the invariant measure is that much too strong on its shear planes (the
+column collapse: runout 0.556 against the multiscale run's 0.631; with the shear-cell
+measure 0.633).
 
 Steady values are means over shear strain >= `steady_from`; their 95 % confidence band
 is a batch-means estimate (the window split into BLOCKS consecutive blocks, Student t
@@ -207,7 +214,7 @@ def mu_i_table(name: str, fit: dict, params: RVEParams, d: float, porosity: floa
     rho = (1.0 - porosity) * params.density
     return "\n".join([
         f"# mu(I) of the RVE of {source}, fitted by `grainscale rve flow`",
-        "# (continuum measure: tau = sqrt(s:s/2), p = mean stress; rms residual "
+        "# (shear-cell measure: tau_xz / sigma_n against I of sigma_n; rms residual "
         f"{fit['rms']:.3g} bands{bound})",
         f"[materials.{name}]",
         'type = "mu_i"',

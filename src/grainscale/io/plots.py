@@ -41,12 +41,13 @@ def plot_flow(path: str | Path, col: dict, fits: dict, title: str = "") -> None:
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     for m, i, label, fmt in (("mu", "I", "tau/sigma_n vs I(sigma_n)", "o"),
                              ("mu_p", "I_p", "sqrt(J2)/p vs I(p)", "s")):
-        ax1.errorbar(col[i], col[m], xerr=col[f"{i}_err"], yerr=col[f"{m}_err"], fmt=fmt,
-                     capsize=3, label=label)
+        bars = ax1.errorbar(col[i], col[m], xerr=col[f"{i}_err"], yerr=col[f"{m}_err"],
+                            fmt=fmt, capsize=3, label=label)
         if m in fits:
             f = fits[m]
             x = np.geomspace(col[i].min() / 2, col[i].max() * 2, 100)
             ax1.plot(x, f["mu_s"] + (f["mu_2"] - f["mu_s"]) / (f["I_0"] / x + 1), "--",
+                     color=bars[0].get_color(),
                      label=f"fit: mu_s {f['mu_s']:.3f}, mu_2 {f['mu_2']:.3f}, "
                            f"I_0 {f['I_0']:.3g}")
     ax2.errorbar(col["I"], col["porosity"], xerr=col["I_err"], yerr=col["porosity_err"],
