@@ -6,6 +6,10 @@
     python examples/column_collapse/flow_friction.py record CASE OUT [--until 2.5]
         runs CASE to `until` tau_c after release, recording every step's dH, dt and
         stress per point and every RVE's state at release (OUT/record.npz, snapshot.npz);
+    python examples/column_collapse/flow_friction.py compare OUT TABLE.toml [--window 20]
+        compares, point by point and step by step, the friction sqrt(J2)/p that each
+        flowing RVE carried with the mu(I) of TABLE.toml (a `grainscale rve flow` fit) at
+        that RVE's own pressure and shear rate (from the recorded dH);
     python examples/column_collapse/flow_friction.py replay OUT [--points 8]
         replays the recorded dH of the most sheared points on their RVEs taken at
         release: as run, rebuilt from positions (tangential history restarts, the
@@ -170,6 +174,46 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
     print("median " + " ".join(f"{degrees(np.median(v)):16.1f}" for v in table.values()))
 
 
+def compare(out: Path, table: Path, window: int = 20) -> None:
+    """Does each flowing RVE carry the steady mu(I) of TABLE at its own pressure and rate?
+
+    For every point and step: p and mu_p = sqrt(s:s/2)/p of the RVE's stress, and the
+    shear rate gdot = sqrt(2 D':D') of the point's recorded dH summed over `window` MPM
+    steps (one step's increment is dominated by the grid's noise); I = gdot d
+    sqrt(rho_s / p). Prints the median RVE mu_p and the median of mu(I) of the table at
+    the same samples, for the points that flow (gdot > 1/s, p > 20 Pa)."""
+    rec = np.load(out / "record.npz")
+    dH, dts, sig, t = rec["dH"], rec["dt"], rec["sig"], rec["t"]
+    law = next(iter(tomllib.loads(table.read_text())["materials"].values()))
+    sym = 0.5 * (dH + np.swapaxes(dH, 2, 3))
+    dev = sym - np.trace(sym, axis1=2, axis2=3)[..., None, None] * np.eye(3) / 3
+    kernel = np.ones(window)
+    summed = np.apply_along_axis(lambda x: np.convolve(x, kernel, "same"), 0,
+                                 dev.reshape(len(dts), -1)).reshape(dev.shape)
+    span = np.convolve(dts, kernel, "same")
+    gdot = np.sqrt(2 * (summed * summed).sum((2, 3))) / span[:, None]
+    s = 0.5 * (sig + np.swapaxes(sig, 2, 3))
+    p = -np.trace(s, axis1=2, axis2=3) / 3
+    sd = s + p[..., None, None] * np.eye(3)
+    mu_rve = np.sqrt(0.5 * (sd * sd).sum((2, 3))) / np.maximum(p, 1e-12)
+    inertial = gdot * law["grain_diameter"] * np.sqrt(law["grain_density"]
+                                                      / np.maximum(p, 1e-12))
+    mu_law = law["mu_s"] + (law["mu_2"] - law["mu_s"]) / (law["I_0"] / np.maximum(
+        inertial, 1e-12) + 1)
+    flowing = (gdot > 1.0) & (p > 20.0)
+    print(f"window {window} MPM steps; medians over flowing samples")
+    print("t/tau_c     samples   median I   mu_p RVE   mu(I) of the fit   RVE / fit")
+    rows = [(f"{lo:4.1f}-{lo + 0.5:3.1f}", ((t / TAU_C >= lo) & (t / TAU_C < lo + 0.5))[:, None])
+            for lo in np.arange(0.0, t.max() / TAU_C, 0.5)]
+    for name, when in [*rows, ("all    ", np.ones((len(t), 1), bool))]:
+        w = when & flowing
+        if w.sum() < 10:
+            continue
+        ratio = np.median(mu_rve[w] / mu_law[w])
+        print(f"{name}  {w.sum():9d}  {np.median(inertial[w]):9.3f}  "
+              f"{np.median(mu_rve[w]):9.3f}  {np.median(mu_law[w]):17.3f}  {ratio:10.3f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -179,6 +223,10 @@ def main() -> None:
     r.add_argument("case", type=Path)
     r.add_argument("out", type=Path)
     r.add_argument("--until", type=float, default=2.5, help="tau_c after release")
+    c = sub.add_parser("compare")
+    c.add_argument("out", type=Path)
+    c.add_argument("table", type=Path, help="TOML with one [materials.X] type = mu_i table")
+    c.add_argument("--window", type=int, default=20, help="MPM steps per rate sample")
     p = sub.add_parser("replay")
     p.add_argument("out", type=Path)
     p.add_argument("--points", type=int, default=8, help="how many of the most sheared")
@@ -190,6 +238,8 @@ def main() -> None:
         frames(a.out)
     elif a.command == "record":
         record(a.case, a.out, a.until)
+    elif a.command == "compare":
+        compare(a.out, a.table, a.window)
     else:
         replay(a.out, a.points, a.tiles, a.skip)
 
