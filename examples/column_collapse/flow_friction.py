@@ -7,9 +7,9 @@
         runs CASE to `until` tau_c after release, recording every step's dH, dt and
         stress per point and every RVE's state at release (OUT/record.npz, snapshot.npz);
     python examples/column_collapse/flow_friction.py compare OUT TABLE.toml [--window 20]
-        compares, point by point and step by step, the friction sqrt(J2)/p that each
-        flowing RVE carried with the mu(I) of TABLE.toml (a `grainscale rve flow` fit) at
-        that RVE's own pressure and shear rate (from the recorded dH);
+        compares, point by point and step by step, the friction tau/sigma_n that each
+        flowing RVE carried on its shear plane (read from the recorded dH) with the mu(I)
+        of TABLE.toml (a `grainscale rve flow` fit) at that RVE's own sigma_n and rate;
     python examples/column_collapse/flow_friction.py replay OUT [--points 8]
         replays the recorded dH of the most sheared points on their RVEs taken at
         release: as run, rebuilt from positions (tangential history restarts, the
@@ -177,32 +177,35 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
 def compare(out: Path, table: Path, window: int = 20) -> None:
     """Does each flowing RVE carry the steady mu(I) of TABLE at its own pressure and rate?
 
-    For every point and step: p and mu_p = sqrt(s:s/2)/p of the RVE's stress, and the
-    shear rate gdot = sqrt(2 D':D') of the point's recorded dH summed over `window` MPM
-    steps (one step's increment is dominated by the grid's noise); I = gdot d
-    sqrt(rho_s / p). Prints the median RVE mu_p and the median of mu(I) of the table at
-    the same samples, for the points that flow (gdot > 1/s, p > 20 Pa)."""
+    TABLE is a `grainscale rve flow` fit, in the shear-cell measure (tau/sigma_n on the
+    shear plane). Each point's shear plane is read from its recorded dH summed over
+    `window` MPM steps (one step's increment is dominated by the grid's noise): the
+    deviatoric part is nearly a simple shear gdot t n^T, whose largest singular triple
+    gives the rate gdot, the shear direction t and the plane normal n. The RVE's
+    |t . sigma n| / (-n . sigma n) is compared with mu(I) at I = gdot d sqrt(rho_s /
+    sigma_n). Medians over the points that flow (gdot > 1/s, sigma_n > 20 Pa), per
+    interval of t / tau_c."""
     rec = np.load(out / "record.npz")
     dH, dts, sig, t = rec["dH"], rec["dt"], rec["sig"], rec["t"]
     law = next(iter(tomllib.loads(table.read_text())["materials"].values()))
-    sym = 0.5 * (dH + np.swapaxes(dH, 2, 3))
-    dev = sym - np.trace(sym, axis1=2, axis2=3)[..., None, None] * np.eye(3) / 3
+    dev = dH - np.trace(dH, axis1=2, axis2=3)[..., None, None] * np.eye(3) / 3
     kernel = np.ones(window)
     summed = np.apply_along_axis(lambda x: np.convolve(x, kernel, "same"), 0,
                                  dev.reshape(len(dts), -1)).reshape(dev.shape)
     span = np.convolve(dts, kernel, "same")
-    gdot = np.sqrt(2 * (summed * summed).sum((2, 3))) / span[:, None]
-    s = 0.5 * (sig + np.swapaxes(sig, 2, 3))
-    p = -np.trace(s, axis1=2, axis2=3) / 3
-    sd = s + p[..., None, None] * np.eye(3)
-    mu_rve = np.sqrt(0.5 * (sd * sd).sum((2, 3))) / np.maximum(p, 1e-12)
+    u, sv, vt = np.linalg.svd(summed)
+    gdot = sv[..., 0] / span[:, None]
+    t_dir, n = u[..., :, 0], vt[..., 0, :]
+    sym = 0.5 * (sig + np.swapaxes(sig, 2, 3))
+    sn = -np.einsum("...i,...ij,...j->...", n, sym, n)
+    mu_rve = np.abs(np.einsum("...i,...ij,...j->...", t_dir, sym, n)) / np.maximum(sn, 1e-12)
     inertial = gdot * law["grain_diameter"] * np.sqrt(law["grain_density"]
-                                                      / np.maximum(p, 1e-12))
+                                                      / np.maximum(sn, 1e-12))
     mu_law = law["mu_s"] + (law["mu_2"] - law["mu_s"]) / (law["I_0"] / np.maximum(
         inertial, 1e-12) + 1)
-    flowing = (gdot > 1.0) & (p > 20.0)
+    flowing = (gdot > 1.0) & (sn > 20.0)
     print(f"window {window} MPM steps; medians over flowing samples")
-    print("t/tau_c     samples   median I   mu_p RVE   mu(I) of the fit   RVE / fit")
+    print("t/tau_c     samples   median I   tau/sigma_n RVE   mu(I) of the fit   RVE / fit")
     rows = [(f"{lo:4.1f}-{lo + 0.5:3.1f}", ((t / TAU_C >= lo) & (t / TAU_C < lo + 0.5))[:, None])
             for lo in np.arange(0.0, t.max() / TAU_C, 0.5)]
     for name, when in [*rows, ("all    ", np.ones((len(t), 1), bool))]:
@@ -211,7 +214,7 @@ def compare(out: Path, table: Path, window: int = 20) -> None:
             continue
         ratio = np.median(mu_rve[w] / mu_law[w])
         print(f"{name}  {w.sum():9d}  {np.median(inertial[w]):9.3f}  "
-              f"{np.median(mu_rve[w]):9.3f}  {np.median(mu_law[w]):17.3f}  {ratio:10.3f}")
+              f"{np.median(mu_rve[w]):16.3f}  {np.median(mu_law[w]):17.3f}  {ratio:10.3f}")
 
 
 def main() -> None:
