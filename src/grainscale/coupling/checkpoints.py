@@ -38,6 +38,7 @@ import h5py
 import numpy as np
 
 from grainscale.config.base import ConfigError
+from grainscale.io import faults
 from grainscale.io.checkpoint import (
     CorruptCheckpoint,
     read_checkpoint,
@@ -98,13 +99,15 @@ def save(out: Path, s: MPMState, counters: dict[str, int], case: dict,
     # must not overwrite the parts the current manifest still names
     folder = out / PARTS / f"{s.step:010d}_{s.comm.size}"
     error = None
+    faults.point("checkpoint.begin")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         write_checkpoint(folder / f"rank_{s.comm.rank:05d}.h5", rank_state(s),
-                         {"step": s.step})
+                         {"step": s.step}, fault="checkpoint.part")
     except OSError as err:
         error = f"writing checkpoint part {folder}: {err}"
     _stop_if_any(s.comm, error)
+    faults.point("checkpoint.parts_written")
     if s.comm.root:
         try:
             _commit(out, s, folder, counters, case, previous)
@@ -112,6 +115,17 @@ def save(out: Path, s: MPMState, counters: dict[str, int], case: dict,
             error = f"writing checkpoint {out / MANIFEST}: {err}"
     _stop_if_any(s.comm, error)
     s.comm.barrier()  # no rank runs ahead into a new part while rank 0 cleans up
+    faults.point("checkpoint.done")
+
+
+def discard(out: Path) -> None:
+    """Remove the checkpoints an earlier run left in `out` (rank 0, at the start of a
+    new run, before its history.csv replaces the old one): a resume must not continue
+    them with the new run's history. Until every manifest is gone the old history.csv
+    is still there, so a kill at any moment leaves a consistent folder."""
+    for name in (PREVIOUS, MANIFEST):
+        (out / name).unlink(missing_ok=True)
+    shutil.rmtree(out / PARTS, ignore_errors=True)
 
 
 def _stop_if_any(comm, error: str | None) -> None:
@@ -130,6 +144,7 @@ def _commit(out: Path, s: MPMState, folder: Path, counters: dict, case: dict,
     elif previous == manifest and manifest.is_file():
         os.replace(manifest, prev)
     # else previous is prev: checkpoint.h5 is the bad one a resume fell back from
+    faults.point("checkpoint.rotated")
     groups = {"case": {"json": np.frombuffer(json.dumps(case, sort_keys=True).encode(),
                                              dtype=np.uint8)}}
     if s.rigid is not None:
@@ -137,11 +152,13 @@ def _commit(out: Path, s: MPMState, folder: Path, counters: dict, case: dict,
                            "force": s.rigid.force}
     attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "last_dt": s.last_dt,
              "ranks": s.comm.size, "parts": f"{PARTS}/{folder.name}", **counters}
-    write_checkpoint(manifest, groups, attrs)
+    write_checkpoint(manifest, groups, attrs, fault="checkpoint.manifest")
+    faults.point("checkpoint.committed")
     keep = {folder.name, _parts_name(prev)}
     for old in (out / PARTS).iterdir():
         if old.name not in keep:
             shutil.rmtree(old, ignore_errors=True)
+            faults.point("checkpoint.cleanup")
 
 
 def _parts_name(manifest: Path) -> str | None:

@@ -5,11 +5,12 @@ Outputs in --out: `case.resolved.toml` (every default filled in, package version
 `frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
 for a rigid body), `cost.json` (time per step split into MPM, DEM, communication,
 waiting and other), and a checkpoint (coupling/checkpoints.py) every N steps and at the
-end of the run when checkpointing is on. `--resume` continues from the newest valid one
-(a damaged one is skipped with a warning) if the case still has its physics
-(checkpoints.check_case; --allow-changed names keys that may differ): history rows and
-frames written after it are dropped, so the continued run writes the same history.csv
-as an uninterrupted one.
+end of the run when checkpointing is on (a new run first removes an earlier run's).
+`--resume` continues from the newest valid one (a damaged one is skipped with a
+warning) if the case still has its physics (checkpoints.check_case; --allow-changed
+names keys that may differ): history rows and frames written after it are dropped, so
+the continued run writes the same history.csv as an uninterrupted one, whatever moment
+it was killed at (io/faults.py names those moments, for tests).
 
 Under MPI (`mpiexec -n N grainscale run ...`) every rank runs this loop on the points it
 owns; rank 0 writes the outputs from points gathered to it. A SimulationError on any
@@ -37,6 +38,7 @@ from grainscale.coupling.outputs import gather, history_values, point_fields
 from grainscale.coupling.rebalance import rebalance
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.distributed.comm import Comm, world
+from grainscale.io import faults
 from grainscale.io.history import History
 from grainscale.io.progress import Progress
 from grainscale.io.vtk import PVDSeries, write_points_vtu
@@ -218,6 +220,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
         n_rows = n_frames = 0
         last_row_step = -1
         if root:
+            checkpoints.discard(out)  # an earlier run's: they do not match the new history
             history = History(out / "history.csv", columns, case.title)
             pvd = PVDSeries(out / "frames.pvd")
             rigid_pvd = PVDSeries(out / "rigid.pvd")
@@ -239,6 +242,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
             v = np.tile(s.rigid.velocity_at(s.time), (len(s.rigid.x), 1))
             write_points_vtu(f, s.rigid.x, {"velocity": v})
             rigid_pvd.add(s.time, f)
+        faults.point("frame.written")
 
     def counters() -> dict[str, int]:
         written = {"rows_written": history.rows, "frames_written": len(pvd.entries),
@@ -267,11 +271,14 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
     step_comm = step_wait = 0.0  # inside the steps (not outputs', checkpoints')
     run_start = wallclock.perf_counter()
     step_seconds = 0.0
+    faults.point("run.start")
     try:
         while True:
+            faults.point("step.begin")
             # scheduled outputs at t0 + k * interval (the row of step 0 included)
             if due(n_rows, o.interval):
                 write_row()
+                faults.point("history.row")
                 last_row_step = s.step
                 while due(n_rows, o.interval):
                     n_rows += 1
@@ -297,6 +304,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
                 dt = limit
             dt = min(dt, t_end - s.time)
             step(s, dt)
+            faults.point("step.advanced")
             step_seconds += wallclock.perf_counter() - t_step
             step_comm += comm.comm_seconds - c0
             step_wait += comm.wait_seconds - w0
@@ -306,6 +314,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
                 balance = {"rebalances": balance["rebalances"] + 1,
                            "imbalance_before_last": moved["before"],
                            "imbalance_after_last": moved["after"]}
+                faults.point("step.rebalanced")
             bar.update(dt, s.step)
         if every and saved_step != s.step:  # before the final row: a resume drops it
             save()
@@ -319,6 +328,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
         write_row()  # final row (unscheduled)
     if root:
         history.close()
+    faults.point("run.end")
     if steps_run:
         report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start,
                              step_comm, step_wait)

@@ -22,6 +22,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from grainscale.io import faults
+
 ATTRS_DIGEST = "attrs_sha256"
 
 
@@ -56,8 +58,9 @@ def _fsync_dir(folder: Path) -> None:
 
 
 def write_checkpoint(path: str | Path, groups: dict[str, dict[str, np.ndarray]],
-                     attrs: dict[str, float | int | str]) -> None:
-    """Write arrays and attributes with their checksums to `path`, atomically."""
+                     attrs: dict[str, float | int | str], fault: str = "h5") -> None:
+    """Write arrays and attributes with their checksums to `path`, atomically.
+    `fault` prefixes the names of the points io/faults.py can kill at (for tests)."""
     path = Path(path)
     tmp = path.with_name(path.stem + ".tmp.h5")
     with h5py.File(tmp, "w") as f:
@@ -65,14 +68,19 @@ def write_checkpoint(path: str | Path, groups: dict[str, dict[str, np.ndarray]],
         for k, v in plain.items():
             f.attrs[k] = v
         f.attrs[ATTRS_DIGEST] = attrs_digest(plain)
-        for g, arrays in groups.items():
+        for i, (g, arrays) in enumerate(groups.items()):
             grp = f.create_group(g)
             for k, a in arrays.items():
                 a = np.asarray(a)
                 grp.create_dataset(k, data=a).attrs["sha256"] = array_digest(a)
+            if faults.ARMED and i == 0:  # a temporary file cut short (tests)
+                f.flush()
+                faults.point(f"{fault}.mid_write")
         f.flush()
         os.fsync(f.id.get_vfd_handle())
+    faults.point(f"{fault}.tmp_written")
     os.replace(tmp, path)
+    faults.point(f"{fault}.renamed")
     _fsync_dir(path.parent)
 
 

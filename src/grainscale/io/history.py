@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from grainscale.io import faults
+
 UNITS = {
     "step": "-", "time": "s", "dt": "s", "kinetic_energy": "J", "t_over_tc": "-",
     "runout_ratio": "-", "height_ratio": "-", "front": "m", "column_height": "m",
@@ -50,6 +52,7 @@ class History:
         kept = lines[:n_head + n_rows]
         tmp = self.path.with_name(self.path.name + ".tmp")
         tmp.write_text("".join(kept))
+        faults.point("history.truncate_tmp")
         tmp.replace(self.path)
         self.rows = len(kept) - n_head
 
@@ -58,7 +61,13 @@ class History:
         for c in self.columns:
             v = values[c]
             row.append(str(int(v)) if c == "step" else repr(float(v)))
-        self._f.write(",".join(row) + "\n")
+        line = ",".join(row) + "\n"
+        if faults.ARMED:  # tests (io/faults.py): a kill with half the row on disk
+            self._f.write(line[:len(line) // 2])
+            self._f.flush()
+            faults.point("history.mid_row")
+            line = line[len(line) // 2:]
+        self._f.write(line)
         self._f.flush()
         self.rows += 1
 

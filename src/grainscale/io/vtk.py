@@ -14,6 +14,8 @@ from xml.sax.saxutils import quoteattr
 import meshio
 import numpy as np
 
+from grainscale.io import faults
+
 
 def _atomic_replace(tmp: Path, path: Path) -> None:
     os.replace(tmp, path)
@@ -40,7 +42,9 @@ def write_points_vtu(path: str | Path, points: np.ndarray,
     tmp = path.with_name(path.name + ".tmp.vtu")
     meshio.write(tmp, meshio.Mesh(pts, cells, point_data=data), file_format="vtu",
                  binary=True, compression=None)
+    faults.point("vtu.tmp_written")
     _atomic_replace(tmp, path)
+    faults.point("vtu.renamed")
 
 
 class PVDSeries:
@@ -52,7 +56,8 @@ class PVDSeries:
 
     @classmethod
     def load(cls, path: str | Path, keep: int | None = None) -> PVDSeries:
-        """Read an existing series (keeping its first `keep` entries) to continue it."""
+        """Read an existing series (cut back to its first `keep` entries, if it has
+        more) to continue it."""
         import xml.etree.ElementTree as ET
 
         s = cls(path)
@@ -60,7 +65,7 @@ class PVDSeries:
             root = ET.parse(s.path).getroot()
             for ds in root.iter("DataSet"):
                 s.entries.append((float(ds.get("timestep")), ds.get("file")))
-        if keep is not None:
+        if keep is not None and len(s.entries) > keep:  # (a series never begun stays so)
             s.entries = s.entries[:keep]
             s.write()
         return s
@@ -80,4 +85,5 @@ class PVDSeries:
         lines += ["  </Collection>", "</VTKFile>", ""]
         tmp = self.path.with_name(self.path.name + ".tmp")
         tmp.write_text("\n".join(lines))
+        faults.point("pvd.tmp_written")
         _atomic_replace(tmp, self.path)
