@@ -137,6 +137,33 @@ def test_an_increment_the_rve_cannot_take_names_the_point(small_rve, bad):
         mat.update(dH, 1e-3, stress)
 
 
+@pytest.mark.parametrize("substeps", [1, 8])
+def test_a_nan_in_one_rve_stops_the_run_naming_the_point(small_rve, substeps):
+    """A NaN in one grain's velocity of one point's RVE stops the run with a
+    SimulationError naming the material and the point (its number among all the
+    material's points, here held by a process owning points 4, 7 and 9).
+
+    Fails with the finiteness check inside the fastmath DEM kernel (numba 0.68): over
+    one DEM step the NaN velocity went unnoticed (the kernel's isfinite of the kinetic
+    energy was folded away, and the stress handed to the MPM was still finite); over
+    several it reached a division and raised ZeroDivisionError inside the parallel loop,
+    a bare SystemError naming no point."""
+    from grainscale.mpm.step import SimulationError
+
+    params, packing = small_rve
+    mat = RVEMaterial("sand", params, [packing], n_points=10, local=np.array([4, 7, 9]))
+    stress = mat.initial_stress()
+    dt = (substeps - 0.5) * mat.dt_crit
+    dH = np.zeros((3, 3, 3))
+    mat.update(dH, dt, stress)
+    assert mat.substeps == substeps
+    batch = mat.batch
+    grain = int(np.argmax(batch.nbr_count[2]))  # one with neighbours
+    batch.v[2, grain, 1] = np.nan
+    with pytest.raises(SimulationError, match="material 'sand', its point 9: .*non-finite"):
+        mat.update(dH, dt, stress)
+
+
 def _extension(rates, d=0.01):
     """Isochoric plane extension increments (stretch along x, thinning along z) of log
     strain d times each point's rate factor."""

@@ -31,6 +31,14 @@ Per step of one RVE (dt fixed):
 5. h <- h_new; flag a list rebuild when 2 max|u'| + |h h_ref^-1 - I|_F cutoff >= skin
    (u' = h (s - s_ref) the fluctuating displacement since the build, bounded by
    sqrt(|h|_1 |h|_inf) |s - s_ref|): no pair can then have entered the cutoff unseen.
+
+Finiteness is not tested here: fastmath lets LLVM assume that no value is NaN or
+infinite, so such a test may be folded away (an `isfinite` of the kinetic energy was,
+with numba 0.68). engine.not_finite checks every RVE after each call instead, in a
+compiled loop without fastmath. The kernels use numba's numpy error model: under fastmath
+a NaN divisor may compare equal to zero, and the Python model would then raise
+ZeroDivisionError inside the parallel loop (a bare SystemError, naming no RVE) instead of
+letting the NaN through to that check.
 """
 
 from __future__ import annotations
@@ -42,8 +50,6 @@ from numba import njit, prange
 
 from grainscale.dem.neighbours import OK, build, image_table
 
-# status codes beyond the neighbour ones
-NOT_FINITE = 3
 SERVO_EVERY = 4  # steps between stress samples of a servo
 
 
@@ -72,7 +78,7 @@ def _sgn(a):
     return 1.0 if a != 0.0 else 0.0
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass, L, nbr_j,
                  nbr_shift, nbr_count, ft, force, torque, x, table, stress_out, stiff_out,
                  homogenise):
@@ -276,7 +282,7 @@ def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass,
     return ncontact, fsum
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
                 h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo, stiffness,
                 step_count,
@@ -432,8 +438,6 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
             need_rebuild[0] = 1
         done += 1
         if last:
-            if not math.isfinite(ekin):
-                status = NOT_FINITE
             out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
             out[2] = ekin
     out[0] = ncontact

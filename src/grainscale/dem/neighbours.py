@@ -8,7 +8,9 @@ image shift. Lists are rebuilt when a pair could have moved by more than the ski
 contact's tangential history over to its new list slot.
 
 Status codes returned by `build`: 0 ok, 1 capacity overflow (nothing was modified; the
-driver regrows the capacity and retries), 2 cell thinner than twice the cutoff.
+driver regrows the capacity and retries), 2 cell thinner than twice the cutoff, 3 a
+position not finite (nothing was modified: a NaN would give a bin index outside the
+cell list).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from grainscale.dem.cell import perpendicular_widths
 
 SHIFT_ZERO = 13  # code of the image shift (0, 0, 0)
 INVALID_SHIFT = 255  # an entry awaiting removal by the next build (never matched)
-OK, OVERFLOW, TOO_THIN = 0, 1, 2
+OK, OVERFLOW, TOO_THIN, NOT_FINITE = 0, 1, 2, 3
 
 
 @njit(cache=True, inline="always")
@@ -95,6 +97,8 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
             if x >= 1.0:  # s slightly below an integer rounds to exactly 1.0
                 x -= 1.0
                 f += 1
+            if not (x >= 0.0 and x < 1.0):  # NaN or infinite s (inf - inf is NaN)
+                return NOT_FINITE, 0
             wrapv[i, k] = int(f)
             sw[i, k] = x
         b0 = min(int(sw[i, 0] * nb[0]), nb[0] - 1)
