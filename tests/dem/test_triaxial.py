@@ -5,9 +5,15 @@ Expected physics (seed Fig. 4-5; Thornton 2000, Geotechnique 50(1)): lateral str
 held at the confining pressure; q/p rises steeply, peaks at a few % axial strain and
 softens toward a lower residual value; the volume first contracts slightly, then
 dilates, and dilation slows as the residual state is approached.
+
+Reference data (tests/data/triaxial_150/, README there): the same test of the same stored
+150-sphere packing run in YADE 2023.02a (same contact law, damping, time step and servo),
+in several realisations.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +21,10 @@ from dem_helpers import SMALL_PARAMS
 
 from grainscale.config.rve import RVEParams, TriaxialTest
 from grainscale.dem import element_tests
-from grainscale.dem.generate import generate
+from grainscale.dem.state import from_packing
+from grainscale.io.packing import read_packing
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "triaxial_150"
 
 
 def smooth(y, k):
@@ -23,8 +32,11 @@ def smooth(y, k):
     return np.convolve(y, np.ones(k) / k, mode="valid")
 
 
-def check_path(rows, confining, window, peak_range, soften=None):
+def check_path(rows, confining, window, peak_range=None, soften=None):
     """Assert the drained-compression stress path; returns (axial, q/p, eps_v).
+
+    peak_range: bounds of the peak of q/p (smoothed over `window` rows), or None when the
+    caller checks the peak itself.
 
     soften=None: only require no hardening after the peak (small RVEs: whether and how
     much they soften is a matter of the realisation); else the mean q/p over the last
@@ -45,12 +57,12 @@ def check_path(rows, confining, window, peak_range, soften=None):
                   < 0.02)
     # 2. q/p rises steeply (elastic stiffness: well above 0.5 within 1 % strain) ...
     assert qp[np.searchsorted(a, 0.01)] > 0.5
-    # ... to a peak in the range of frictional spheres with mu = 0.5 (peak friction
-    # angle ~21-37 deg: M = 6 sin phi/(3 - sin phi) = 0.8-1.5), on the smoothed curve
-    # (running mean over `window` rows: stick-slip noise of a small RVE)
+    # ... to a peak, on the smoothed curve (running mean over `window` rows: stick-slip
+    # noise of a small RVE)
     sm = smooth(qp, window)
     k = int(np.argmax(sm))
-    assert peak_range[0] < sm[k] < peak_range[1]
+    if peak_range is not None:
+        assert peak_range[0] < sm[k] < peak_range[1]
     # 3. after the peak region (2-6 % strain) q/p does not harden further: the mean over
     #    the last 5 % of strain stays below 1.05 x the mean over 2-6 % (measured ratios
     #    0.75-1.00 over 5 seeds of 150 spheres; 0.83 for 800 spheres)
@@ -68,26 +80,82 @@ def check_path(rows, confining, window, peak_range, soften=None):
     return a, qp, ev
 
 
-def test_triaxial_small(small_packing):
-    """150 spheres to 15 % axial strain at 0.1 /s (inertial number
-    I = rate d sqrt(rho/p) ~ 2e-4: quasi-static). Window of 5 rows = 1 % strain."""
-    b = small_packing.copy()
+def _yade_runs():
+    """The YADE realisations: (axial strain, q/p, eps_v) rows every 0.002 from 0.002."""
+    return [np.loadtxt(f, delimiter=",", skiprows=1)[:, :3]
+            for f in sorted(DATA.glob("yade_*.csv"))]
+
+
+def test_triaxial_small_against_yade():
+    """150 spheres (the stored packing of tests/data/triaxial_150) to 15 % axial strain
+    at 0.1 /s (inertial number I = rate d sqrt(rho/p) ~ 2e-4: quasi-static); window of
+    5 rows = 1 % strain. Against the same test in YADE 2023.02a:
+
+    1. Up to 1 % axial strain, before slip events make each run a different realisation,
+       the paths are the same: q/p within 6e-3 and eps_v within 1.5e-4 of every YADE
+       run, row by row. Measured: 1.3e-3 and 8e-6 apart (7 YADE runs); realisations of
+       our own (grain velocities perturbed by 1e-9 m/s, 16 runs) spread by up to 3.9e-3
+       and 7.9e-5 at 1 %. A contact law off by a little is outside: friction 0.48
+       instead of 0.5 moves q/p by 1.2e-2, kt/kn 0.7 instead of 0.8 by 1.4e-2, kt 10 %
+       low by 1.1e-2, E 10 % low by 6e-2 (and eps_v by 1.3e-3).
+    2. The peak of q/p (smoothed) within 0.08 of YADE's mean peak. Realisations peak at
+       1.133 +- 0.019 here (16 runs, 1.113-1.194) and at 1.124 +- 0.006 in YADE (the
+       7 stored runs); 0.08 is 4 standard deviations of one realisation, so that any
+       machine's realisation passes: +-7 % where the old band 0.8-1.5 allowed +-30 %.
+       One realisation cannot pin the law tighter (0.9 mu peaks at 1.059, inside),
+       which is what check 1 does (0.9 mu moves the early path by 3.2e-2).
+    3. The final dilation, eps_v at 15 %, within 0.02 of YADE's mean: realisations end
+       at 0.038 +- 0.007 here (0.026-0.052), YADE's at 0.039 +- 0.007.
+    """
+    h, centres, radii = read_packing(DATA / "packing.txt")
+    b = from_packing(h, centres, radii, SMALL_PARAMS.density)
     test = TriaxialTest(confining_pressure=100e3, axial_strain=0.15, strain_rate=0.1,
                         output_interval=0.002)
     rows = element_tests.triaxial(b, SMALL_PARAMS, test)
     assert rows[-1]["axial_strain"] == pytest.approx(0.15, abs=0.003)
-    check_path(rows, 100e3, window=5, peak_range=(0.8, 1.5))
+    a, qp, ev = check_path(rows, 100e3, window=5)
+    refs = _yade_runs()
+    assert len(refs) >= 4
+    for ref in refs:
+        n = len(ref)
+        # the same rows: same time step, rows every 0.002 of axial strain
+        np.testing.assert_allclose(a[1:n + 1], ref[:, 0], rtol=0, atol=1e-5)
+        early = ref[:, 0] < 0.0101
+        assert early.sum() == 5
+        np.testing.assert_allclose(qp[1:n + 1][early], ref[early, 1], rtol=0, atol=6e-3)
+        np.testing.assert_allclose(ev[1:n + 1][early], ref[early, 2], rtol=0, atol=1.5e-4)
+    peak = smooth(qp, 5).max()
+    ref_peak = np.mean([smooth(ref[:, 1], 5).max() for ref in refs])
+    assert abs(peak - ref_peak) < 0.08, (peak, ref_peak)
+    ref_dilation = np.mean([ref[-1, 2] for ref in refs])
+    assert abs(ev[-1] - ref_dilation) < 0.02, (ev[-1], ref_dilation)
 
 
 @pytest.mark.slow
 def test_triaxial_unit_element_800():
-    """Seed section 4.1 RVE (800 spheres) to 30 % axial strain at 0.25 /s (I ~ 4e-4).
-    The larger RVE is less noisy: it must soften, the residual (last 5 %) q/p at least
-    10 % below the peak region (measured 17 %)."""
+    """Seed section 4.1 RVE (800 spheres, the stored packing of tests/data/triaxial_800)
+    to 30 % axial strain at 0.25 /s (I ~ 4e-4), against the same test in YADE 2023.02a
+    (one run, tests/data/triaxial_800; made as in tests/data/triaxial_150/README.md with
+    AXIAL 0.3 and RATE 0.25). The larger RVE is less noisy: it must soften, the residual
+    (last 5 %) q/p at least 10 % below the peak region (measured 17 %); up to 1 % strain
+    the paths agree as for 150 spheres (measured 1.8e-3 in q/p, 8e-6 in eps_v, over 8
+    realisations); its smoothed peak, 0.998 +- 0.005 over 8 realisations here and 1.002
+    in YADE, within 0.03 (4 standard deviations of the difference of two
+    realisations); eps_v at 30 %, 0.049 +- 0.003 here and 0.046 in YADE, within 0.015."""
     params = RVEParams(preparation={"pressure": 100e3, "porosity": 0.373})
-    b = generate(params)
+    h, centres, radii = read_packing(DATA.parent / "triaxial_800" / "packing.txt")
+    b = from_packing(h, centres, radii, params.density)
     test = TriaxialTest(confining_pressure=100e3, axial_strain=0.3, strain_rate=0.25,
                         output_interval=0.002)
     rows = element_tests.triaxial(b, params, test)
-    check_path(rows, 100e3, window=5, peak_range=(0.8, 1.5), soften=0.9)
+    a, qp, ev = check_path(rows, 100e3, window=5, soften=0.9)
     assert rows[-1]["axial_strain"] == pytest.approx(0.3, abs=0.003)
+    ref = np.loadtxt(DATA.parent / "triaxial_800" / "yade_0.csv", delimiter=",",
+                     skiprows=1)
+    n = len(ref)
+    np.testing.assert_allclose(a[1:n + 1], ref[:, 0], rtol=0, atol=1e-5)
+    early = ref[:, 0] < 0.0101
+    np.testing.assert_allclose(qp[1:n + 1][early], ref[early, 1], rtol=0, atol=6e-3)
+    np.testing.assert_allclose(ev[1:n + 1][early], ref[early, 2], rtol=0, atol=1.5e-4)
+    assert abs(smooth(qp, 5).max() - smooth(ref[:, 1], 5).max()) < 0.03
+    assert abs(ev[-1] - ref[-1, 2]) < 0.015

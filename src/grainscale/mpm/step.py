@@ -140,6 +140,9 @@ def grid_velocity(s: MPMState) -> None:
     s.v_mapped = v.copy() if s.velocity_update == "flip" else v
     impose(s, v)
     if s.rigid is not None:
+        # the material's velocity at the covered nodes before the body imposes its own:
+        # the momentum the body takes away there is part of its reaction
+        s.rigid_v_material = v[s.rigid_nodes].copy()
         v[s.rigid_nodes] = s.rigid_v
     s.v_old = v
 
@@ -183,12 +186,13 @@ def integrate_grid(s: MPMState, dt: float) -> None:
     rigid body; the rigid body's reaction is recorded."""
     f = s.force
     if s.rigid is not None:
-        # the force the body exerts on the nodes it covers is (m_I v_body - p_I)/dt - f_I;
+        # the force the body exerts on the nodes it covers is (m_I v_body - p_I)/dt - f_I,
+        # p_I the material's momentum there (mapped, after the Dirichlet conditions);
         # the material pushes back with minus its sum (damping does not enter: it is a
         # numerical device of the free nodes)
         rn = s.rigid_nodes
         target = s.mass[rn, None] * s.rigid_v[None, :]
-        p_rn = s.mass[rn, None] * s.v_old[rn] + dt * f[rn]
+        p_rn = s.mass[rn, None] * s.rigid_v_material + dt * f[rn]
         s.rigid.force = -(target - p_rn).sum(axis=0) / dt
     if s.damping > 0.0 and s.time < s.damping_end:
         boundary.local_damping(f, s.v_old, s.damping)

@@ -1,0 +1,122 @@
+"""Drained triaxial test of a stored packing in YADE, set up as grainscale's
+element_tests.triaxial; writes the reference curves of tests/dem/test_triaxial.py.
+
+    yade -n -x yade_triaxial.py PACKING OUT [SEED [AXIAL [RATE]]]
+
+SEED >= 0 perturbs the grain velocities by ~1e-9 m/s (another realisation of the same
+RVE); -1 (default) starts at rest. Same grains and contact law (FrictMat: kn = 2 E r1 r2 /
+(r1 + r2), ks/kn = poisson = 0.8, mu = tan(frictionAngle) = 0.5, E = 100 MPa, density
+2650), Cundall local damping 0.2, dt = 0.3 sqrt(m_min/(E r_max)); the axial (z) edge
+shortened at a constant engineering rate RATE (default 0.1 /s: L_zz = -rate/(1 - rate t));
+lateral stresses held at -100 kPa by grainscale's proportional servo, sampled every 4
+steps: L_kk = gain (sigma* - sigma_kk)/(C_kk dt), C_kk = (1/V) sum kn |d|^2 n_k^4 (updated
+every 40 steps), gain 0.05, clipped to 10 x rate. A row every 0.002 axial strain to AXIAL
+(default 0.15): axial strain, q/p, eps_v = ln(V/V0), sigma_xx, yy, zz (compression
+positive), p, q; the first row (before any step, no contacts yet) is all zero.
+"""
+import math
+import sys
+
+import numpy as np
+from yade import O, utils
+from yade.minieigenHP import Matrix3, Vector3
+from yade.wrapper import (
+    Bo1_Sphere_Aabb,
+    ForceResetter,
+    FrictMat,
+    Ig2_Sphere_Sphere_ScGeom,
+    InsertionSortCollider,
+    InteractionLoop,
+    Ip2_FrictMat_FrictMat_FrictPhys,
+    Law2_ScGeom_FrictPhys_CundallStrack,
+    NewtonIntegrator,
+    PyRunner,
+)
+
+packing, out = sys.argv[1], sys.argv[2]
+seed = int(sys.argv[3]) if len(sys.argv) > 3 else -1
+E, RATIO, MU, RHO, DAMP = 100e6, 0.8, 0.5, 2650.0, 0.2
+RATE = float(sys.argv[5]) if len(sys.argv) > 5 else 0.1
+CONF, GAIN, EVERY, MAX_RATE = 100e3, 0.05, 4, 10 * RATE
+AXIAL = float(sys.argv[4]) if len(sys.argv) > 4 else 0.15
+INTERVAL = 0.002
+
+lines = [ln for ln in open(packing) if not ln.startswith("#")]
+h = np.array([float(v) for v in lines[0].split()]).reshape(3, 3)
+data = np.array([[float(v) for v in ln.split()] for ln in lines[1:] if ln.strip()])
+O.periodic = True
+O.cell.hSize = Matrix3(*h.ravel())
+mat = O.materials.append(FrictMat(young=E, poisson=RATIO, frictionAngle=math.atan(MU),
+                                  density=RHO))
+rng = np.random.default_rng(seed) if seed >= 0 else None
+for x, y, z, r in data:
+    b = utils.sphere(Vector3(x, y, z), r, material=mat)
+    O.bodies.append(b)
+    if rng is not None:  # a different realisation: grain velocities differ by ~1e-9 m/s
+        b.state.vel = Vector3(*rng.normal(0.0, 1e-9, 3))
+m_min = RHO * 4.0 / 3.0 * math.pi * data[:, 3].min() ** 3
+O.dt = 0.3 * math.sqrt(m_min / (E * data[:, 3].max()))
+O.engines = [
+    ForceResetter(),
+    InsertionSortCollider([Bo1_Sphere_Aabb()]),
+    InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_FrictMat_FrictMat_FrictPhys()],
+                    [Law2_ScGeom_FrictPhys_CundallStrack()]),
+    NewtonIntegrator(damping=DAMP),
+]
+l0 = h[2, 2]
+V0 = abs(np.linalg.det(h))
+
+
+def stiffness():
+    V = O.cell.volume
+    c = np.zeros(3)
+    for i in O.interactions:
+        if not i.isReal:
+            continue
+        n = np.array(i.geom.normal)
+        d = (i.geom.refR1 + i.geom.refR2 - i.geom.penetrationDepth)
+        c += i.phys.kn * d * d * n**4
+    return c / V
+
+
+def row():
+    s = np.array(utils.getStress())
+    p = -np.trace(s) / 3.0
+    dev = s + p * np.eye(3)
+    q = math.sqrt(1.5 * np.sum(dev * dev))
+    hs = np.array(O.cell.hSize)
+    return [(l0 - hs[2, 2]) / l0, q / p, math.log(abs(np.linalg.det(hs)) / V0),
+            -s[0, 0], -s[1, 1], -s[2, 2], p, q]
+
+
+steps_row = max(1, round(INTERVAL / (RATE * O.dt)))
+n_rows = math.ceil(AXIAL / (steps_row * RATE * O.dt) - 1e-9)
+rows = [row()]
+t = 0.0
+lat = np.zeros(2)
+c = np.zeros(3)
+
+
+def servo():
+    """Every EVERY steps: sample the stress, set the cell's velocity gradient."""
+    global c
+    s = np.array(utils.getStress())
+    if O.iter % (10 * EVERY) == 0:
+        c = stiffness()
+    for a in range(2):
+        err = -CONF - s[a, a]
+        rate = (GAIN * err / (c[a] * O.dt) if c[a] > 0
+                else (MAX_RATE if err > 0 else -MAX_RATE))
+        lat[a] = min(max(rate, -MAX_RATE), MAX_RATE)
+    O.cell.velGrad = Matrix3(lat[0], 0, 0, 0, lat[1], 0, 0, 0, -RATE / (1.0 - RATE * O.time))
+
+
+O.engines = O.engines[:3] + [PyRunner(command="servo()", iterPeriod=EVERY)] + O.engines[3:]
+for k in range(n_rows):
+    O.run(steps_row, True)
+    rows.append(row())
+    if k % 10 == 0:
+        print(k, n_rows, rows[-1][:3], flush=True)
+np.savetxt(out, np.array(rows), delimiter=",",
+           header="axial_strain,q_over_p,volumetric_strain,sigma_xx,sigma_yy,sigma_zz,p,q",
+           comments="")
