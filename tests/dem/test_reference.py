@@ -95,7 +95,9 @@ def reference_step(st, p, dt, lc):
     # integration with the new cell
     h_new = h + dt * hdot
     alpha = p.damping
-    v += dt / st["mass"][:, None] * (force - alpha * np.abs(force) * np.sign(v))
+    # the pseudo-force -m L v' of the co-moving frame, from the pre-update velocities
+    v += dt / st["mass"][:, None] * (force - alpha * np.abs(force) * np.sign(v)) \
+        - dt * v @ L.T
     w += dt / st["inertia"][:, None] * (torque - alpha * np.abs(torque) * np.sign(w))
     s += (v * dt) @ np.linalg.inv(h_new).T
     st["rot"] += np.linalg.norm(w, axis=1) * dt

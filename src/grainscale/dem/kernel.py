@@ -25,8 +25,9 @@ Per step of one RVE (dt fixed):
    the kinetic stress (1/V) sum m v' (x) v' of the fluctuating velocities v', and
    the affine stiffness C_ab, on servo samples and on the last step of a call. Without
    a servo, `stiffness` holds the last step's C (the MPM's wave speed reads it).
-4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion:
-   v += dt (F - alpha |F| sign v)/m, same for rotation; s += h_new^-1 v dt;
+4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion and the
+   pseudo-force of the co-moving frame (SLLOD): v += dt (F - alpha |F| sign v)/m
+   - dt L v, rotation without it (spins are about W); s += h_new^-1 v dt;
    accumulated rotation += |w| dt.
 5. h <- h_new; flag a list rebuild when 2 max|u'| + |h h_ref^-1 - I|_F cutoff >= skin
    (u' = h (s - s_ref) the fluctuating displacement since the build, bounded by
@@ -396,9 +397,14 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
             t2 = torque[i, 2]
             if last:
                 fres += math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
-            v[i, 0] += im * (f0 - damping * math.copysign(f0, v[i, 0]) * _sgn(v[i, 0]))
-            v[i, 1] += im * (f1 - damping * math.copysign(f1, v[i, 1]) * _sgn(v[i, 1]))
-            v[i, 2] += im * (f2 - damping * math.copysign(f2, v[i, 2]) * _sgn(v[i, 2]))
+            # the pseudo-force -m L v' of the co-moving frame (SLLOD): a grain that
+            # feels no force keeps its lab-frame velocity while the cell deforms
+            lv0 = dt * (L[0, 0] * v[i, 0] + L[0, 1] * v[i, 1] + L[0, 2] * v[i, 2])
+            lv1 = dt * (L[1, 0] * v[i, 0] + L[1, 1] * v[i, 1] + L[1, 2] * v[i, 2])
+            lv2 = dt * (L[2, 0] * v[i, 0] + L[2, 1] * v[i, 1] + L[2, 2] * v[i, 2])
+            v[i, 0] += im * (f0 - damping * math.copysign(f0, v[i, 0]) * _sgn(v[i, 0])) - lv0
+            v[i, 1] += im * (f1 - damping * math.copysign(f1, v[i, 1]) * _sgn(v[i, 1])) - lv1
+            v[i, 2] += im * (f2 - damping * math.copysign(f2, v[i, 2]) * _sgn(v[i, 2])) - lv2
             w[i, 0] += ii * (t0 - damping * math.copysign(t0, w[i, 0]) * _sgn(w[i, 0]))
             w[i, 1] += ii * (t1 - damping * math.copysign(t1, w[i, 1]) * _sgn(w[i, 1]))
             w[i, 2] += ii * (t2 - damping * math.copysign(t2, w[i, 2]) * _sgn(w[i, 2]))
