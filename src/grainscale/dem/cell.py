@@ -18,11 +18,6 @@ import numpy as np
 from numba import njit
 
 
-def volume(h: np.ndarray) -> float:
-    """Cell volume det(h) [m^3]."""
-    return float(np.linalg.det(h))
-
-
 @njit(cache=True)
 def perpendicular_widths(h: np.ndarray) -> np.ndarray:
     """Distance between each pair of opposite faces [m]: w_k = det h / |a_i x a_j|."""
@@ -39,30 +34,6 @@ def perpendicular_widths(h: np.ndarray) -> np.ndarray:
         c2 = h[0, i] * h[1, j] - h[1, i] * h[0, j]
         out[k] = vol / np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
     return out
-
-
-def to_cartesian(h: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """x = h s for every row of s (..., 3)."""
-    return s @ h.T
-
-
-def to_fractional(h: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """s = h^-1 x for every row of x (..., 3)."""
-    return np.linalg.solve(h, x.T).T if x.ndim == 2 else np.linalg.solve(h, x)
-
-
-def wrap(s: np.ndarray) -> np.ndarray:
-    """Fractional coordinates brought back into [0, 1)."""
-    w = s - np.floor(s)
-    return np.where(w >= 1.0, 0.0, w)
-
-
-def min_image(h: np.ndarray, ds: np.ndarray) -> np.ndarray:
-    """Cartesian minimum-image branch vector for fractional differences ds (..., 3).
-
-    Valid while all perpendicular widths exceed twice the distance of interest.
-    """
-    return (ds - np.round(ds)) @ h.T
 
 
 def lattice_reduce(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

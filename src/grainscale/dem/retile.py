@@ -19,16 +19,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from grainscale.dem.cell import perpendicular_widths
 from grainscale.dem.neighbours import INVALID_SHIFT, decode_shifts, encode_shifts
 from grainscale.dem.state import RVEBatch, allocate, grow_capacity
 
 
 def widths(h: np.ndarray) -> np.ndarray:
-    """(R,3) perpendicular widths w_k = |det h| / |a_i x a_j| of a batch of cells [m]."""
-    a = np.swapaxes(h, 1, 2)  # a[:, k] is edge k
-    areas = np.stack([np.linalg.norm(np.cross(a[:, (k + 1) % 3], a[:, (k + 2) % 3]), axis=1)
-                      for k in range(3)], axis=1)
-    return np.abs(np.linalg.det(h))[:, None] / areas
+    """(R,3) perpendicular widths of a batch of cells [m] (cell.perpendicular_widths)."""
+    return np.array([perpendicular_widths(np.ascontiguousarray(c)) for c in h])
 
 
 def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
