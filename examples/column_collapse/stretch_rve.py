@@ -62,7 +62,8 @@ def main() -> None:
     shifts = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     big = from_packing(2 * h, np.concatenate([x + s @ h.T for s in shifts]), np.tile(r, 8),
                        params.density)
-    runs = {n: stretched(RVEMaterial(n, params, [batch], 1), args.rate, args.max_stretch)
+    runs = {n: stretched(RVEMaterial(n, params, [batch], 1, retile_width=0.0), args.rate,
+                         args.max_stretch)
             for n, batch in [(f"{len(r)}", from_packing(h, x, r, params.density)),
                              (f"{8 * len(r)} (2x2x2)", big)]}
     print(f"{'stretch':>7} | " + " | ".join(f"{n:>28}" for n in runs))

@@ -31,7 +31,8 @@ def rotation(axis, angle):
 
 def test_rigid_rotation_rotates_stress_and_changes_nothing_else(small_rve):
     params, packing = small_rve
-    mat = RVEMaterial("sand", params, [packing], n_points=2, assignment_seed=0)
+    mat = RVEMaterial("sand", params, [packing], n_points=2, assignment_seed=0,
+                      retile_width=0.0)
     stress = mat.initial_stress()
     dt = 1e-4  # s
     # identical axial preload of both points (0.5 % along z) for an anisotropic stress
@@ -79,7 +80,7 @@ def test_rigid_rotation_rotates_stress_and_changes_nothing_else(small_rve):
 
 def test_dynamic_substeps_follow_the_mpm_step(small_rve):
     params, packing = small_rve
-    mat = RVEMaterial("sand", params, [packing], n_points=1)
+    mat = RVEMaterial("sand", params, [packing], n_points=1, retile_width=0.0)
     stress = mat.initial_stress()
     dt = 7.5 * mat.dt_crit
     mat.update(np.zeros((1, 3, 3)), dt, stress)
@@ -90,7 +91,7 @@ def test_dynamic_substeps_follow_the_mpm_step(small_rve):
 def test_quasi_static_substeps_follow_the_increment(small_rve):
     params, packing = small_rve
     mat = RVEMaterial("sand", params, [packing], n_points=2, mode="quasi_static",
-                      strain_per_substep=1e-5)
+                      strain_per_substep=1e-5, retile_width=0.0)
     stress = mat.initial_stress()
     dH = np.zeros((2, 3, 3))
     dH[0, 2, 2] = -2.05e-4  # needs 21 steps of at most 1e-5 strain
@@ -111,7 +112,7 @@ def test_an_rve_that_cannot_go_on_stops_the_run_cleanly(small_rve):
 
     params, packing = small_rve
     mat = RVEMaterial("sand", params, [packing], n_points=2, mode="quasi_static",
-                      strain_per_substep=1e-4)
+                      strain_per_substep=1e-4, retile_width=0.0)
     stress = mat.initial_stress()
     dH = np.zeros((2, 3, 3))
     dH[1, 2, 2] = -0.05  # point 1 only: 5 % per increment
@@ -128,7 +129,7 @@ def test_an_increment_the_rve_cannot_take_names_the_point(small_rve, bad):
     from grainscale.mpm.step import SimulationError
 
     params, packing = small_rve
-    mat = RVEMaterial("sand", params, [packing], n_points=3)
+    mat = RVEMaterial("sand", params, [packing], n_points=3, retile_width=0.0)
     stress = mat.initial_stress()
     dH = np.zeros((3, 3, 3))
     dH[2, 0, 1] = bad
@@ -151,7 +152,8 @@ def test_a_nan_in_one_rve_stops_the_run_naming_the_point(small_rve, substeps):
     from grainscale.mpm.step import SimulationError
 
     params, packing = small_rve
-    mat = RVEMaterial("sand", params, [packing], n_points=10, local=np.array([4, 7, 9]))
+    mat = RVEMaterial("sand", params, [packing], n_points=10, local=np.array([4, 7, 9]),
+                      retile_width=0.0)
     stress = mat.initial_stress()
     dt = (substeps - 0.5) * mat.dt_crit
     dH = np.zeros((3, 3, 3))
@@ -183,7 +185,7 @@ def test_thin_cells_are_doubled_and_go_on(small_rve):
     params, packing = small_rve
     dH = _extension([1.0, 0.0, 0.5])
     kw = {"mode": "quasi_static", "strain_per_substep": 1e-4}
-    plain = RVEMaterial("sand", params, [packing], n_points=3, **kw)
+    plain = RVEMaterial("sand", params, [packing], n_points=3, retile_width=0.0, **kw)
     stress = plain.initial_stress()
     with pytest.raises(SimulationError, match="its point 0: .*too thin"):
         for _ in range(100):
@@ -267,7 +269,7 @@ def test_wave_speed_follows_the_contact_network(small_rve, strain):
     from grainscale.dem import engine
 
     params, packing = small_rve
-    mat = RVEMaterial("sand", params, [packing], n_points=1)
+    mat = RVEMaterial("sand", params, [packing], n_points=1, retile_width=0.0)
     stress = mat.initial_stress()
 
     def speed(c):  # over the bulk density now, as the material divides it [m/s]
@@ -287,7 +289,7 @@ def test_wave_speed_follows_the_contact_network(small_rve, strain):
         assert mat.wave_speed() == pytest.approx(expected, rel=1e-12)
     c1 = mat.wave_speed()
     assert (c1 > 1.02 * c0) if strain < 0 else (c1 < 0.9 * c0), (c0, c1)
-    restored = RVEMaterial("sand", params, [packing], n_points=1)
+    restored = RVEMaterial("sand", params, [packing], n_points=1, retile_width=0.0)
     restored.load_state({k: v.copy() for k, v in mat.state().items()})
     assert restored.wave_speed() == c1
 
@@ -298,7 +300,7 @@ def test_stress_handed_to_the_mpm_is_the_symmetric_part(small_rve):
     the MPM's stress array gets exactly sym(sigma), the RVE keeps its own sigma."""
     params, packing = small_rve
     params = params.model_copy(update={"damping": 0.0})
-    mat = RVEMaterial("sand", params, [packing], n_points=2)
+    mat = RVEMaterial("sand", params, [packing], n_points=2, retile_width=0.0)
     stress = mat.initial_stress()
     assert np.array_equal(stress, stress.transpose(0, 2, 1))
     dH = np.zeros((2, 3, 3))

@@ -236,7 +236,7 @@ def test_love_weber_stress_of_hand_computed_configuration():
     x = np.array([x0, x0 + [d1, 0, 0], x0 + d2])
     x[1, 0] -= side  # sphere 1 sits across the x face
     b = from_packing(np.eye(3) * side, x, r, DENSITY)
-    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.8, friction=0.5)
+    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.8, friction=0.5, damping=0.0)
     engine.refresh(b, p)
     assert b.ncontact[0] == 2
 
@@ -393,7 +393,8 @@ def test_kinetic_stress_of_a_granular_gas():
     b = from_packing(np.eye(3) * side, x, np.full(4, 0.5e-3), DENSITY, capacity=4)
     b.v[0] = rng.normal(0.0, 0.01, (4, 3))
     v0 = b.v[0].copy()
-    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.5, friction=0.5, skin=0.2e-3)
+    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.5, friction=0.5, damping=0.0,
+                             skin=0.2e-3)
     engine.advance(b, 1, 1e-6, p, engine.rate_control(1))
     assert b.ncontact[0] == 0
     expected = -np.einsum("p,pa,pb->ab", b.mass[0], v0, v0) / side**3

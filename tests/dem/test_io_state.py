@@ -105,7 +105,8 @@ def test_vtk_contact_line_starts_at_drawn_sphere_across_boundary(tmp_path):
     x1 = np.array([0.005e-3, 5e-3, 5e-3])
     b = from_packing(np.eye(3) * 10e-3, np.array([x1, x1 + [2 * r - 1e-5, 0, 0]]),
                      np.array([r, r]), 2500.0)
-    p = engine.ContactParams(young=1e7, stiffness_ratio=0.5, friction=0.5, skin=0.5e-3)
+    p = engine.ContactParams(young=1e7, stiffness_ratio=0.5, friction=0.5, damping=0.0,
+                             skin=0.5e-3)
     b.v[0, :, 0] = -1.0  # both drift across the x face together
     engine.advance(b, 6, engine.critical_dt(b, p, 0.1), p, engine.rate_control(1))
     assert b.s[0, 0, 0] < 0 and b.need_rebuild[0] == 0 and b.ncontact[0] == 1

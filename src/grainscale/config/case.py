@@ -21,6 +21,7 @@ Pos = Annotated[float, Field(gt=0)]
 NonNeg = Annotated[float, Field(ge=0)]
 Axis = Literal["x", "y", "z"]
 Face = Literal["x-", "x+", "y-", "y+", "z-", "z+"]
+FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is given
 
 
 class GridCfg(StrictModel):
@@ -37,7 +38,7 @@ class SolverCfg(StrictModel):
     # point velocity update: "apic" (affine PIC) or "flip" (the FLIP/PIC blend of `flip`,
     # whose PIC share dissipates once per step, so by an amount that depends on dt)
     velocity_update: Literal["apic", "flip"] = "apic"
-    flip: Annotated[float, Field(ge=0, le=1)] | None = None  # "flip" only; default 0.99
+    flip: Annotated[float, Field(ge=0, le=1)] | None = None  # "flip" only; FLIP_DEFAULT
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
     dt: Pos | None = None  # s; fixed step (checked against the CFL limit); default: CFL
     gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
@@ -48,7 +49,7 @@ class SolverCfg(StrictModel):
     @model_validator(mode="after")
     def _flip(self):
         if self.velocity_update == "flip" and self.flip is None:
-            self.flip = 0.99
+            self.flip = FLIP_DEFAULT
         elif self.velocity_update == "apic" and self.flip is not None:
             raise ValueError(
                 f"flip = {self.flip} applies to velocity_update = 'flip' only, and "

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from grainscale.config.case import DEMMaterialCfg
 from grainscale.config.rve import RVEParams
 from grainscale.dem import engine, homogenise, lattice, retile
 from grainscale.dem.generate import contact_params
@@ -49,6 +50,9 @@ def _sym(sigma: np.ndarray) -> np.ndarray:
     return 0.5 * (sigma + np.swapaxes(sigma, -1, -2))
 
 
+_DEM = DEMMaterialCfg(type="dem")  # the case file's defaults are the only ones
+
+
 def _counts(state: dict[str, np.ndarray]) -> np.ndarray:
     """(P,) spheres of each RVE of a saved state (older states: all the stored count)."""
     s = state["rve_s"]
@@ -65,14 +69,17 @@ class RVEMaterial:
     """
 
     def __init__(self, name: str, params: RVEParams, library: list[RVEBatch], n_points: int,
-                 assignment_seed: int = 0, mode: str = "dynamic", min_substeps: int = 1,
-                 strain_per_substep: float = 1e-5, local: np.ndarray | None = None,
-                 retile_width: float = 0.0, retile_max_factor: int = 8):
+                 assignment_seed: int = _DEM.assignment_seed,
+                 mode: str = _DEM.time_integration, min_substeps: int = _DEM.min_substeps,
+                 strain_per_substep: float = _DEM.strain_per_substep,
+                 local: np.ndarray | None = None, retile_width: float = _DEM.retile_width,
+                 retile_max_factor: int = _DEM.retile_max_factor):
         """n_points: points of this material over all ranks; local: the indices (into
         them) of the points this process holds (default: all). The packing of each point
         is drawn for all points with the seed, so it does not depend on the ranks.
         retile_width: cells narrower than this many mean grain diameters are doubled
-        (0: never), up to retile_max_factor times the packing's spheres."""
+        (0: never), up to retile_max_factor times the packing's spheres. The defaults
+        are those of a case file's "dem" material (config.case.DEMMaterialCfg)."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         self.name = name

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from grainscale.config.rve import Numerics
 from grainscale.dem.kernel import advance_batch, contact_pass
-from grainscale.dem.neighbours import NOT_FINITE, OK, OVERFLOW, TOO_THIN, build
+from grainscale.dem.neighbours import Status, build
 from grainscale.dem.state import RVEBatch, grow_capacity
 
 
@@ -34,7 +35,7 @@ class ContactParams:
     young: float            # E [Pa]; kn = E r*
     stiffness_ratio: float  # kt / kn
     friction: float         # mu = tan(phi_interparticle)
-    damping: float = 0.0    # Cundall local non-viscous damping coefficient [0, 1)
+    damping: float          # Cundall local non-viscous damping coefficient [0, 1); [rve]
     skin: float = 1e-3      # Verlet skin [m]
     restitution: float = 1.0  # normal coefficient of restitution e, (0, 1]; 1: elastic
 
@@ -139,7 +140,8 @@ def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps, dt: float) -> Con
                    np.zeros(r), e_step=_expm_small(log_step), l_mean=log_step / dt)
 
 
-def critical_dt(batch: RVEBatch, params: ContactParams, safety: float = 0.3) -> float:
+def critical_dt(batch: RVEBatch, params: ContactParams,
+                safety: float = Numerics().timestep_safety) -> float:
     """safety x sqrt(m_min / k_max), k_max = E r_max (the stiffest possible contact) [s]."""
     return safety * float(np.sqrt(batch.mass.min() / (params.young * batch.radius.max())))
 
@@ -213,16 +215,16 @@ def not_finite(batch: RVEBatch) -> np.ndarray:
 
 
 def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
-    bad = not_finite(batch) | (status == NOT_FINITE)
+    bad = not_finite(batch) | (status == Status.NOT_FINITE)
     if np.any(bad):
         r = int(np.argmax(bad))
         raise RVEError(r,
             f"RVE {r}: motion became non-finite (time step too large for the stiffness?)")
-    if np.any(status == OVERFLOW):
-        need = int(out[status == OVERFLOW, 3].max())
+    if np.any(status == Status.OVERFLOW):
+        need = int(out[status == Status.OVERFLOW, 3].max())
         grow_capacity(batch, max(need + 4, int(1.5 * batch.capacity)))
-    if np.any(status == TOO_THIN):
-        r = int(np.argmax(status == TOO_THIN))
+    if np.any(status == Status.TOO_THIN):
+        r = int(np.argmax(status == Status.TOO_THIN))
         raise RVEError(r,
             f"RVE {r}: periodic cell too thin for its spheres (a perpendicular width is "
             f"below 2 x (2 r_max + skin)); it is too small or too distorted for this "
@@ -234,14 +236,14 @@ def _refresh(young, kt_ratio, friction, gamma, skin, h, s, v, w, radius, mass, L
              stiffness, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild, force,
              torque, x, link, wrapv, status, out):
     for r in prange(s.shape[0]):
-        status[r] = OK
+        status[r] = Status.OK
         if need_rebuild[r] != 0:
             st, needed = build(h[r], s[r], radius[r], nbr_j[r], nbr_shift[r],
                                nbr_count[r], ft[r], s_ref[r], h_ref[r], link[r], wrapv[r],
                                x[r], skin)
             out[r, 3] = needed
             status[r] = st
-            if st != OK:
+            if st != Status.OK:
                 continue
             need_rebuild[r] = 0
         table = np.empty((27, 3))
@@ -264,7 +266,7 @@ def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
                  batch.s_ref, batch.h_ref, batch.need_rebuild, batch.force, batch.torque,
                  batch.x, batch.link, batch.wrapv, status, out)
         _check(batch, status, out)
-        if not np.any(status == OVERFLOW):
+        if not np.any(status == Status.OVERFLOW):
             break
     batch.ncontact[:] = out[:, 0]
     batch.stress_servo[:] = batch.stress

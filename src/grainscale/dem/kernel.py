@@ -49,7 +49,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from grainscale.dem.neighbours import OK, build, image_table
+from grainscale.dem.neighbours import Status, build, image_table
 
 SERVO_EVERY = 4  # steps between stress samples of a servo
 
@@ -312,7 +312,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
     for i in range(n):
         rmax = max(rmax, radius[i])
     cutoff = 2.0 * rmax + skin
-    status = OK
+    status = Status.OK
     done = 0
     ncontact = 0
     fsum = 0.0
@@ -326,7 +326,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
             st, needed = build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref,
                                h_ref, link, wrapv, x, skin)
             out[3] = needed
-            if st != OK:
+            if st != Status.OK:
                 status = st
                 break
             need_rebuild[0] = 0

@@ -16,6 +16,7 @@ cell list).
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
@@ -24,7 +25,15 @@ from grainscale.dem.cell import perpendicular_widths
 
 SHIFT_ZERO = 13  # code of the image shift (0, 0, 0)
 INVALID_SHIFT = 255  # an entry awaiting removal by the next build (never matched)
-OK, OVERFLOW, TOO_THIN, NOT_FINITE = 0, 1, 2, 3
+
+
+class Status(IntEnum):
+    """Outcome of a list build or a kernel call, per RVE (stored in int64 arrays)."""
+
+    OK = 0
+    OVERFLOW = 1  # a neighbour list needs more capacity; the caller regrows and redoes
+    TOO_THIN = 2  # a perpendicular cell width is below twice the cutoff
+    NOT_FINITE = 3  # a non-finite position (NaN or infinite fractional coordinate)
 
 
 @njit(cache=True, inline="always")
@@ -84,7 +93,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
     cut2 = cutoff * cutoff
     widths = perpendicular_widths(h)
     if widths.min() < 2.0 * cutoff:
-        return TOO_THIN, 0
+        return Status.TOO_THIN, 0
     nb = _bins_per_axis(widths, cutoff, n)
     nbins = nb[0] * nb[1] * nb[2]
     head = link[:nbins]
@@ -98,7 +107,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
                 x -= 1.0
                 f += 1
             if not (x >= 0.0 and x < 1.0):  # NaN or infinite s (inf - inf is NaN)
-                return NOT_FINITE, 0
+                return Status.NOT_FINITE, 0
             wrapv[i, k] = int(f)
             sw[i, k] = x
         b0 = min(int(sw[i, 0] * nb[0]), nb[0] - 1)
@@ -114,7 +123,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
         c = _scan(i, h, sw, nb, head, nxt, cut2, nbr_j, nbr_shift, False)
         need = max(need, c)
     if need > cap:
-        return OVERFLOW, need
+        return Status.OVERFLOW, need
 
     # pass 2: write rows, carrying tangential history over (matched by j and image)
     old_j = np.empty(cap, np.int64)
@@ -155,7 +164,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
     for a in range(3):
         for b in range(3):
             h_ref[a, b] = h[a, b]
-    return OK, need
+    return Status.OK, need
 
 
 @njit(cache=True)

@@ -14,16 +14,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from grainscale.config.case import FLIP_DEFAULT, DampingCfg, SolverCfg
 from grainscale.distributed.comm import Comm
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import Points
 from grainscale.mpm.rigid import RigidBody
-from grainscale.mpm.shape import GIMP, evaluate, stencil_width
+from grainscale.mpm.shape import evaluate, stencil_width
 from grainscale.mpm.transfer import Transfer, g2p_kernel, velocity_gradient_kernel
 
 SCHEMES = ("USF", "USL", "MUSL")
 VELOCITY_UPDATES = ("apic", "flip")
+_SOLVER = SolverCfg()  # the case file's defaults are the only ones
+_DAMPING = DampingCfg()
 MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry no velocity
 
 
@@ -46,12 +49,12 @@ class MPMState:
     tractions: list = field(default_factory=list)  # boundary.Traction
     rigid: RigidBody | None = None
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m/s^2
-    scheme: str = "USF"
-    shape: str = GIMP
-    velocity_update: str = "apic"  # "apic", or "flip": the FLIP/PIC blend of `flip`
-    flip: float = 1.0  # FLIP fraction of the "flip" velocity update (0 = PIC)
-    cfl: float = 0.5
-    damping: float = 0.0  # local damping coefficient alpha
+    scheme: str = _SOLVER.scheme
+    shape: str = _SOLVER.shape
+    velocity_update: str = _SOLVER.velocity_update  # "apic", or "flip": the FLIP/PIC blend
+    flip: float = FLIP_DEFAULT  # FLIP fraction of the "flip" velocity update (0 = PIC)
+    cfl: float = _SOLVER.cfl
+    damping: float = _DAMPING.alpha  # local damping coefficient alpha
     damping_end: float = np.inf  # s, damping acts while time < damping_end
     time: float = 0.0  # s
     step: int = 0
