@@ -215,3 +215,45 @@ def test_allow_changed_needs_resume(tmp_path, capsys):
     assert "--allow-changed solver.gravity: applies only with --resume" in (
         capsys.readouterr().err)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("target", ["part", "manifest"])
+def test_a_full_disk_stops_the_run_cleanly_and_keeps_the_last_checkpoint(
+        target, reference, tmp_path, monkeypatch, capsys):
+    """Disk full (ENOSPC) while writing the checkpoint of step 20 (its rank part, or the
+    manifest): the run ends with exit code 1 and a message naming the file and the
+    cause, not a traceback; the checkpoint of step 10 stays valid (as checkpoint.h5, or
+    as checkpoint.prev.h5 once the manifests were rotated), and a resume once space is
+    back ends with the uninterrupted run's history.csv, byte for byte."""
+    import errno
+
+    from grainscale.coupling import checkpoints
+    from grainscale.io import checkpoint as io_checkpoint
+
+    real = io_checkpoint.write_checkpoint
+    calls = {"n": 0}
+
+    def full_disk(path, groups, attrs, **kw):
+        is_target = path.name.startswith("rank_") == (target == "part")
+        if is_target:
+            calls["n"] += 1
+            if calls["n"] == 2:  # the second checkpoint: step 20
+                raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, groups, attrs, **kw)
+
+    monkeypatch.setattr(checkpoints, "write_checkpoint", full_disk)
+    case = _case(tmp_path / "case.toml")
+    out = tmp_path / "run"
+    assert _run(case, out) == 1
+    err = capsys.readouterr().err
+    assert "No space left on device" in err and "checkpoint" in err, err
+    assert "Traceback" not in err
+    monkeypatch.setattr(checkpoints, "write_checkpoint", real)
+    # a failed part leaves checkpoint.h5 (step 10) as it was; a failed manifest comes
+    # after the rotation, so step 10 is checkpoint.prev.h5 and the resume falls back to it
+    kept = out / ("checkpoint.h5" if target == "part" else "checkpoint.prev.h5")
+    with h5py.File(kept, "r") as f:
+        assert int(f.attrs["step"]) == 10
+    assert _run(case, out, "--resume") == 0
+    _, full, _ = reference
+    assert (out / "history.csv").read_bytes() == (full / "history.csv").read_bytes()
