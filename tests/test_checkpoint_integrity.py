@@ -257,3 +257,34 @@ def test_a_full_disk_stops_the_run_cleanly_and_keeps_the_last_checkpoint(
     assert _run(case, out, "--resume") == 0
     _, full, _ = reference
     assert (out / "history.csv").read_bytes() == (full / "history.csv").read_bytes()
+
+
+def test_a_full_disk_while_writing_history_stops_cleanly(reference, tmp_path, monkeypatch,
+                                                        capsys):
+    """ENOSPC from a history row (after the checkpoint of step 20): exit code 1 and a
+    message with the cause and how to continue, no traceback; the resume, once space is
+    back, ends with the uninterrupted run's history.csv byte for byte."""
+    import errno
+
+    from grainscale.io.history import History
+
+    real = History.write
+    calls = {"n": 0}
+
+    def full_disk(self, values):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise OSError(errno.ENOSPC, "No space left on device", str(self.path))
+        return real(self, values)
+
+    monkeypatch.setattr(History, "write", full_disk)
+    case = _case(tmp_path / "case.toml")
+    out = tmp_path / "run"
+    assert _run(case, out) == 1
+    err = capsys.readouterr().err
+    assert "No space left on device" in err and "--resume" in err, err
+    assert "Traceback" not in err
+    monkeypatch.setattr(History, "write", real)
+    assert _run(case, out, "--resume") == 0
+    _, full, _ = reference
+    assert (out / "history.csv").read_bytes() == (full / "history.csv").read_bytes()

@@ -175,6 +175,14 @@ def run_case(case_path, out, *, max_steps: int | None = None,
                     found, progress)
     except ConfigError:
         raise  # raised by every rank (see above): printed once by rank 0
+    except OSError as err:  # disk full, folder not writable: every file is written
+        # atomically or cut back on resume, so the last checkpoint stays valid
+        print(f"grainscale: error: {err} (rank {comm.rank}); the last checkpoint in {out} "
+              "is intact: continue with --resume once the cause is removed", file=sys.stderr)
+        if comm.size > 1:  # the other ranks would wait for this one forever
+            comm.abort(1)
+            os._exit(1)
+        return 1
     except BaseException:
         if comm.size > 1:  # the other ranks would wait for this one forever
             print(f"grainscale: rank {comm.rank} failed:", file=sys.stderr)
