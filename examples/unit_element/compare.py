@@ -20,7 +20,7 @@ import numpy as np
 
 from grainscale.analysis import read_columns, unit_element_metrics
 from grainscale.cli import main as grainscale
-from grainscale.config.rve import load_rve_case
+from grainscale.config.case import load_rve_case
 from grainscale.dem import element_tests
 from grainscale.dem.generate import generate
 from grainscale.io.plots import plot_stress_path

@@ -15,10 +15,10 @@ import pytest
 
 from grainscale.analysis import read_columns, unit_element_metrics
 from grainscale.cli import main
-from grainscale.config.rve import load_rve_case
+from grainscale.cli.demo import demo_case
+from grainscale.config.case import load_rve_case
 from grainscale.dem.element_tests import triaxial_ensemble
 from grainscale.dem.generate import generate
-from grainscale.demo import demo_case
 
 
 @pytest.fixture(scope="module")

@@ -13,8 +13,15 @@ from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from grainscale.config.base import ConfigError, StrictModel, load_toml
-from grainscale.config.rve import IsotropicTest, RVEParams, ShearTest, TriaxialTest, UndrainedTest
+from grainscale.config.base import ConfigError, StrictModel, load_toml, read_toml
+from grainscale.config.rve import (
+    IsotropicTest,
+    RVECase,
+    RVEParams,
+    ShearTest,
+    TriaxialTest,
+    UndrainedTest,
+)
 
 Vec3 = tuple[float, float, float]
 Pos = Annotated[float, Field(gt=0)]
@@ -376,3 +383,19 @@ def load_case(path) -> Case:
     case = load_toml(path, Case)
     check_case(case)
     return case
+
+
+def load_rve_case(path) -> RVECase:
+    """The [rve] and element-test tables of a file for `grainscale rve ...`.
+
+    A full multiscale case file is accepted too (its other tables are validated as a
+    case, so a typo anywhere is still reported), which lets the pure-DEM test of a case's
+    RVE run from the very file of the multiscale run.
+    """
+    data = read_toml(path)
+    mpm_tables = {"grid", "time", "materials", "bodies", "output"}
+    if set(data) <= set(RVECase.model_fields) or not mpm_tables & set(data):
+        return load_toml(path, RVECase)  # a pure RVE file: unknown tables named alone
+    case = load_case(path)
+    tables = {k: getattr(case, k) for k in RVECase.model_fields if getattr(case, k) is not None}
+    return RVECase(**tables)

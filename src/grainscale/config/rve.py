@@ -27,7 +27,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from grainscale.config.base import StrictModel, load_toml, read_toml
+from grainscale.config.base import StrictModel
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -137,21 +137,3 @@ class RVECase(StrictModel):
     undrained: UndrainedTest = UndrainedTest()
     isotropic: IsotropicTest = IsotropicTest()
     shear: ShearTest = ShearTest()
-
-
-def load_rve_case(path) -> RVECase:
-    """The [rve] and element-test tables of a file for `grainscale rve ...`.
-
-    A full multiscale case file is accepted too (its other tables are validated as a
-    case, so a typo anywhere is still reported), which lets the pure-DEM test of a case's
-    RVE run from the very file of the multiscale run.
-    """
-    data = read_toml(path)
-    mpm_tables = {"grid", "time", "materials", "bodies", "output"}
-    if set(data) <= set(RVECase.model_fields) or not mpm_tables & set(data):
-        return load_toml(path, RVECase)  # a pure RVE file: unknown tables named alone
-    from grainscale.config.case import load_case
-
-    case = load_case(path)
-    tables = {k: getattr(case, k) for k in RVECase.model_fields if getattr(case, k) is not None}
-    return RVECase(**tables)

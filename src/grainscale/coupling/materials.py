@@ -16,9 +16,9 @@ from grainscale.config.base import ConfigError
 from grainscale.config.case import Case
 from grainscale.config.rve import RVEParams
 from grainscale.coupling.rve_material import RVEMaterial, bulk_density
-from grainscale.dem.commands import load_packing
 from grainscale.dem.generate import contact_params, generate
 from grainscale.dem.state import RVEBatch
+from grainscale.io.packing import load_packing
 from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
 

@@ -13,10 +13,14 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from grainscale.config.base import ConfigError
+
+if TYPE_CHECKING:
+    from grainscale.dem.state import RVEBatch
 
 HEADER = "# grainscale-packing v1"
 
@@ -81,3 +85,16 @@ def _numbers(text: str, path: Path, lineno: int, count: int) -> np.ndarray:
     if values.size != count or not np.all(np.isfinite(values)):
         raise ConfigError(f"{path}:{lineno}: expected {count} finite numbers, got {text!r}")
     return values
+
+
+def load_packing(path: Path, params) -> RVEBatch:  # noqa: F821 (dem.state, imported late)
+    """A batch of one RVE from a .txt packing (at rest, grain density from params, an
+    RVEParams) or a .h5 full state (io/rve_h5.py)."""
+    from grainscale.dem.state import from_packing
+    from grainscale.io.rve_h5 import read_rve_state
+
+    if path.suffix == ".h5":
+        batch, _ = read_rve_state(path)
+        return batch.take([0])
+    h, centres, radii = read_packing(path)
+    return from_packing(h, centres, radii, params.density)

@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     root = True  # under MPI only rank 0 reports input errors (every rank finds them)
     try:
         if args.command == "demo":
-            from grainscale.demo import run_demo
+            from grainscale.cli.demo import run_demo
 
             return run_demo(args.out)
         if args.command == "run":
@@ -135,9 +135,9 @@ def main(argv: list[str] | None = None) -> int:
                             allow_changed=args.allow_changed,
                             progress=not args.quiet, threads=args.threads, comm=comm)
         if args.command == "rve":
-            from grainscale.dem import commands
+            from grainscale.cli import rve
 
-            return commands.dispatch(args)
+            return rve.dispatch(args)
     except ConfigError as err:
         if root:
             print(f"grainscale: error: {err}", file=sys.stderr)

@@ -13,24 +13,16 @@ from tqdm import tqdm
 
 from grainscale import __version__
 from grainscale.config.base import ConfigError
-from grainscale.config.rve import RVECase, RVEParams, load_rve_case
+from grainscale.config.case import load_rve_case
+from grainscale.config.rve import RVECase
 from grainscale.dem import element_tests, engine, flow
 from grainscale.dem.generate import contact_params, generate
-from grainscale.dem.state import RVEBatch, from_packing
-from grainscale.io.packing import read_packing, write_packing
+from grainscale.dem.state import RVEBatch
+from grainscale.io.packing import load_packing, write_packing
 from grainscale.io.plots import plot_flow, plot_stress_path
 from grainscale.io.progress import Progress
-from grainscale.io.rve_h5 import read_rve_state, write_rve_state
+from grainscale.io.rve_h5 import write_rve_state
 from grainscale.io.rve_vtk import write_rve_vtk
-
-
-def load_packing(path: Path, params: RVEParams) -> RVEBatch:
-    """A batch of one RVE from a .txt packing (at rest) or a .h5 full state."""
-    if path.suffix == ".h5":
-        batch, _ = read_rve_state(path)
-        return batch.take([0])
-    h, centres, radii = read_packing(path)
-    return from_packing(h, centres, radii, params.density)
 
 
 def prepared(case: RVECase, packing: Path | None, quiet: bool) -> RVEBatch:
