@@ -20,7 +20,7 @@ import numpy as np
 from grainscale.coupling.checkpoints import MANIFEST
 from grainscale.dem.cell import perpendicular_widths
 from grainscale.io.checkpoint import read_checkpoint
-from grainscale.mpm.materials.base import p_q
+from grainscale.stress import p_q
 
 
 def main() -> None:

@@ -24,8 +24,8 @@ from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.dem.cell import perpendicular_widths
 from grainscale.dem.state import from_packing
 from grainscale.io.rve_h5 import read_rve_state
-from grainscale.mpm.materials.base import p_q
 from grainscale.mpm.step import SimulationError
+from grainscale.stress import p_q
 
 HERE = Path(__file__).resolve().parent
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grainscale.mpm.materials import DruckerPrager, LinearElastic, MohrCoulomb
-from grainscale.mpm.materials.base import p_q
+from grainscale.stress import p_q
 
 E, NU = 1e7, 0.3
 

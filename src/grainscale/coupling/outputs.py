@@ -14,10 +14,10 @@ import numpy as np
 
 from grainscale.config.case import HISTORY_DEM, Case
 from grainscale.coupling.rve_material import RVEMaterial
-from grainscale.mpm.materials.base import p_q
 from grainscale.mpm.points import Points
 from grainscale.mpm.setup import AXES
 from grainscale.mpm.step import MPMState, kinetic_energy
+from grainscale.stress import p_q
 
 
 def material_fields(s: MPMState) -> dict[str, np.ndarray]:

@@ -10,18 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from grainscale.dem.state import RVEBatch
-
-
-def mean_stress(sigma: np.ndarray) -> np.ndarray:
-    """p = -tr(sigma)/3 [Pa], compression positive; sigma (..., 3, 3)."""
-    return -np.trace(sigma, axis1=-2, axis2=-1) / 3.0
-
-
-def deviatoric_stress(sigma: np.ndarray) -> np.ndarray:
-    """q = sqrt(3/2 s:s) [Pa] (seed Eq. 13), s the deviator of sigma."""
-    p = mean_stress(sigma)
-    s = sigma + p[..., None, None] * np.eye(3)
-    return np.sqrt(1.5 * np.einsum("...ab,...ab->...", s, s))
+from grainscale.stress import deviatoric_stress, mean_stress
 
 
 def volumetric_strain(batch: RVEBatch) -> np.ndarray:

@@ -75,14 +75,6 @@ def p_wave_speed(E: float, nu: float, rho: float) -> float:
     return float(np.sqrt((lam + 2 * G) / rho))
 
 
-def p_q(stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean stress p = -tr(sigma)/3 and deviatoric stress q = sqrt(3/2 s:s), Pa."""
-    p = -np.trace(stress, axis1=-2, axis2=-1) / 3.0
-    s = stress + p[..., None, None] * np.eye(3)
-    q = np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))
-    return p, q
-
-
 @njit(cache=True, fastmath=True, inline="always")
 def rotate_objective(dH, sig, out, A, B):
     """out = R sig R^T with the Hughes-Winget rotation R = (I - W/2)^-1 (I + W/2),
