@@ -36,6 +36,15 @@ def perpendicular_widths(h: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True)
+def perpendicular_widths_batch(h: np.ndarray) -> np.ndarray:
+    """(R,3) perpendicular widths of a batch of cells h (R,3,3) [m]."""
+    out = np.empty((h.shape[0], 3))
+    for r in range(h.shape[0]):
+        out[r] = perpendicular_widths(h[r])
+    return out
+
+
 def lattice_reduce(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A compact basis of the same lattice: returns (h_new, M) with h_new = h M, M unimodular.
 

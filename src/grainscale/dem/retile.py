@@ -19,14 +19,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from grainscale.dem.cell import perpendicular_widths
+from grainscale.dem.cell import perpendicular_widths_batch
 from grainscale.dem.neighbours import INVALID_SHIFT, decode_shifts, encode_shifts
 from grainscale.dem.state import RVEBatch, allocate, grow_capacity
 
 
 def widths(h: np.ndarray) -> np.ndarray:
     """(R,3) perpendicular widths of a batch of cells [m] (cell.perpendicular_widths)."""
-    return np.array([perpendicular_widths(np.ascontiguousarray(c)) for c in h])
+    return perpendicular_widths_batch(np.ascontiguousarray(h))
 
 
 def double_cell(b: RVEBatch, r: int, k: int) -> RVEBatch:
