@@ -159,9 +159,9 @@ def run_flow(case: RVECase, args: argparse.Namespace) -> int:
                                                                    params.density, p))]
     dt = element_tests.timestep(batch, params)
     durations = []  # simulated time of each run, as simple_shear rounds it to whole steps
-    for _, g in cases:
-        steps = max(1, round(flow.SAMPLE_STRAIN / (g * dt)))
-        durations.append(math.ceil(args.strain / (steps * g * dt) - 1e-9) * steps * dt)
+    for p, g in cases:
+        steps, n_rows = element_tests.shear_schedule(flow.shear_test(p, g, args.strain), dt)
+        durations.append(n_rows * steps * dt)
     bar = Progress(0.0, sum(durations), 0.0, 0, enabled=not args.quiet)
     rows = []
     for (p, g), done in zip(cases, np.cumsum([0.0, *durations[:-1]]), strict=True):

@@ -154,6 +154,13 @@ def isotropic(batch: RVEBatch, params: RVEParams, test: IsotropicTest,
             raise RuntimeError("isotropic compression did not reach a static state")
 
 
+def shear_schedule(test: ShearTest, dt: float) -> tuple[int, int]:
+    """(DEM steps per output row, rows) of a simple-shear test at time step dt: whole
+    steps per output_interval of strain, enough rows to reach shear_strain."""
+    steps = max(1, round(test.output_interval / (test.strain_rate * dt)))
+    return steps, math.ceil(test.shear_strain / (steps * test.strain_rate * dt) - 1e-9)
+
+
 def simple_shear(batch: RVEBatch, params: RVEParams, test: ShearTest,
                  on_row: Callable[[Row], None] | None = None) -> list[Row]:
     """Simple shear in the x-z plane: L_xz = rate (v_x = rate z), sigma_zz servo-held at
@@ -165,8 +172,7 @@ def simple_shear(batch: RVEBatch, params: RVEParams, test: ShearTest,
     ctrl = engine.rate_control(batch.n_rve, l_ctrl=lc, servo={2: -test.normal_stress},
                                max_rate=10 * test.strain_rate,
                                gain=params.numerics.servo_gain)
-    steps = max(1, round(test.output_interval / (test.strain_rate * dt)))
-    n_rows = math.ceil(test.shear_strain / (steps * test.strain_rate * dt) - 1e-9)
+    steps, n_rows = shear_schedule(test, dt)
 
     def extra(b: RVEBatch, t: float, r: int) -> Row:
         return {"shear_strain": test.strain_rate * t}

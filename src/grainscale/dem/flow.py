@@ -98,16 +98,20 @@ def tile(batch: RVEBatch, n: int, seed: int = 0) -> RVEBatch:
     return big
 
 
-def steady_mean(x: np.ndarray, blocks: int = BLOCKS) -> tuple[float, float]:
+def steady_mean(x: np.ndarray) -> tuple[float, float]:
     """Mean of a correlated series and the half-width of its 95 % confidence band by
-    batch means: `blocks` consecutive blocks, t_{0.975, blocks-1} std(block means)/sqrt(b)."""
-    if blocks != BLOCKS:
-        raise ValueError(f"blocks = {blocks}: only {BLOCKS} (the tabulated t quantile)")
+    batch means: BLOCKS consecutive blocks, T_975 std(block means) / sqrt(BLOCKS)."""
     x = np.asarray(x, float)
-    if len(x) < 2 * blocks:
-        raise ValueError(f"{len(x)} samples: at least {2 * blocks} needed for a band")
-    means = np.array([b.mean() for b in np.array_split(x, blocks)])
-    return float(x.mean()), float(T_975 * means.std(ddof=1) / math.sqrt(blocks))
+    if len(x) < 2 * BLOCKS:
+        raise ValueError(f"{len(x)} samples: at least {2 * BLOCKS} needed for a band")
+    means = np.array([b.mean() for b in np.array_split(x, BLOCKS)])
+    return float(x.mean()), float(T_975 * means.std(ddof=1) / math.sqrt(BLOCKS))
+
+
+def shear_test(pressure: float, rate: float, strain: float) -> ShearTest:
+    """The simple-shear test of one (pressure [Pa], rate [1/s]) run to `strain`."""
+    return ShearTest(normal_stress=pressure, shear_strain=strain, strain_rate=rate,
+                     output_interval=SAMPLE_STRAIN)
 
 
 def steady_shear(batch: RVEBatch, params: RVEParams, pressure: float, rate: float,
@@ -117,8 +121,7 @@ def steady_shear(batch: RVEBatch, params: RVEParams, pressure: float, rate: floa
     held at -pressure [Pa], to `strain`; returns (steady values as a COLUMNS row, the
     sampled series {column: array}). mu is the Cauchy sigma_xz over sigma_n, positive for
     a positive rate (the report's tau_xz is compression-positive, hence negative here)."""
-    test = ShearTest(normal_stress=pressure, shear_strain=strain, strain_rate=rate,
-                     output_interval=SAMPLE_STRAIN)
+    test = shear_test(pressure, rate, strain)
     rows = element_tests.simple_shear(batch.take([0]), params, test, on_row=on_row)
     series = {k: np.array([r[k] for r in rows]) for k in rows[0]}
     d, rho = mean_diameter(batch), params.density
