@@ -95,6 +95,15 @@ def run_one(case: dict, out: Path) -> float:
     return wall
 
 
+def experiment_bands(ax) -> None:
+    """The published final runouts at a = 0.6 as horizontal lines: Lube et al. 2005
+    (1.2 a) and Lajeunesse et al. 2005 (1.8 a)."""
+    for frac, who, colour in ((1.2, "Lube et al. 2005", "tab:blue"),
+                              (1.8, "Lajeunesse et al. 2005", "tab:red")):
+        ax.axhline(frac * ASPECT, color=colour, ls=":", lw=1,
+                   label=f"{who}: {frac}a = {frac * ASPECT:.2f}")
+
+
 def plot(results: list[dict], histories: dict, png: Path) -> None:
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
     styles = {"mu_i": "-", "mohr_coulomb": "--"}
@@ -106,10 +115,7 @@ def plot(results: list[dict], histories: dict, png: Path) -> None:
         ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], styles[r["material"]],
                 color=colours[r["cell_mm"]], label=f"{r['label']}, {r['cell_mm']:g} mm")
     for b in (ax, bx):
-        b.axhline(1.2 * ASPECT, color="tab:blue", ls=":", lw=1,
-                  label=f"Lube et al. 2005: 1.2a = {1.2 * ASPECT:.2f}")
-        b.axhline(1.8 * ASPECT, color="tab:red", ls=":", lw=1,
-                  label=f"Lajeunesse et al. 2005: 1.8a = {1.8 * ASPECT:.2f}")
+        experiment_bands(b)
     ax.set_xlabel("t / tau_c")
     ax.set_ylabel("(L - L_i) / L_i")
     ax.set_xlim(0, 7)

@@ -33,9 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from convergence import measures, read_history, run_one  # noqa: E402
-
-ASPECT = 0.6
+from convergence import experiment_bands, measures, read_history, run_one  # noqa: E402
 
 
 def measure_flow(out: Path, tiles: int, pressures: list[float],
@@ -88,10 +86,7 @@ def plot(hs: dict, png: Path) -> None:
         ax.plot(t, h["runout_ratio"][after], style, color="k", label=label)
         ke = h["kinetic_energy"][after]
         bx.plot(t, ke / max(ke.max(), 1e-300), style, color="k", label=label)
-    for frac, who, colour in ((1.2, "Lube et al. 2005", "tab:blue"),
-                              (1.8, "Lajeunesse et al. 2005", "tab:red")):
-        ax.axhline(frac * ASPECT, color=colour, ls=":", lw=1,
-                   label=f"{who}: {frac}a = {frac * ASPECT:.2f}")
+    experiment_bands(ax)
     ax.set(xlabel="t / tau_c", ylabel="(L - L_i) / L_i", xlim=(0, 7))
     ax.set_ylim(bottom=0)
     bx.set(xlabel="t / tau_c", ylabel="kinetic energy / peak", xlim=(0, 7), yscale="log")
