@@ -1,0 +1,176 @@
+"""examples/intrusion/analyse.py on synthetic intrusion histories of known slope."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grainscale.io.history import History
+from grainscale.theory.archimedes import k_phi, phi_for_k
+
+SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "intrusion" / "analyse.py"
+COLUMNS = ["step", "time", "depth", "depth_over_R", "force", "force_normalized",
+           "kinetic_energy"]
+RADIUS, RHO_G = 0.5, 1600.0 * 9.81
+AREA = np.pi * RADIUS**2 / 4.0  # quarter model
+SIGMA = 0.1      # scatter of p_u / (rho g R)
+X_T = 0.3        # d/R where the nonlinear start joins the line
+
+
+def _module():
+    spec = importlib.util.spec_from_file_location("intrusion_analyse", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+analyse = _module()
+
+
+def curve(x, k, p0):
+    """A concave start (quadratic) from (0, 0) joining K x + p0 with the same slope at
+    d/R = X_T, then exactly linear."""
+    b = -p0 / X_T**2
+    return np.where(x < X_T, (k + 2 * p0 / X_T) * x + b * x * x, k * x + p0)
+
+
+def write_run(folder: Path, k: float, p0: float, seed: int, shape="cylinder",
+              columns=COLUMNS, d_max=1.05, sigma=SIGMA) -> Path:
+    """history.csv as the project writes it (grainscale.io.history.History): a geostatic
+    stage (time < 0, depth 0) then the intrusion at 12.5 mm a row; case.resolved.toml."""
+    folder.mkdir(parents=True)
+    rng = np.random.default_rng(seed)
+    h = History(folder / "history.csv", columns, title="synthetic intrusion")
+    x = np.arange(0.0, d_max + 1e-9, 0.025)
+    y = curve(x, k, p0) + rng.normal(0.0, sigma, x.size)
+    step = 0
+    for t in (-0.5, -0.25):
+        h.write({c: 0.0 for c in columns} | {"step": step, "time": t, "force": 50.0,
+                                              "force_normalized": 50.0 / AREA / RHO_G / RADIUS})
+        step += 100
+    for xi, yi in zip(x, y, strict=True):
+        row = {"step": step, "time": xi * RADIUS / 0.25, "depth": xi * RADIUS,
+               "depth_over_R": xi, "force": yi * RHO_G * RADIUS * AREA,
+               "force_normalized": yi, "kinetic_energy": 1.0}
+        h.write({c: row[c] for c in columns})
+        step += 100
+    h.close()
+    (folder / "case.resolved.toml").write_text(f'title = "x"\n\n[rigid]\nshape = "{shape}"\n')
+    return folder
+
+
+def run_main(capsys, argv):
+    code = analyse.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def se_expected(window_start, d_max=1.05):
+    """OLS standard errors of slope and intercept for SIGMA scatter on the row grid."""
+    x = np.arange(0.0, d_max + 1e-9, 0.025)
+    x = x[x >= window_start - 1e-12]
+    sxx = np.sum((x - x.mean()) ** 2)
+    return SIGMA / np.sqrt(sxx), SIGMA * np.sqrt(1 / x.size + x.mean() ** 2 / sxx)
+
+
+def test_recovers_slope_and_intercept(tmp_path, capsys):
+    k_true, p0_true = 26.0, 3.0
+    cyl = write_run(tmp_path / "cyl", k_true, p0_true, seed=1)
+    box = write_run(tmp_path / "box", 0.97 * k_true, p0_true, seed=2, shape="box")
+    code, out, err = run_main(capsys, [cyl, box, "--phi", 26.8])
+    assert code == 0, err
+    lines = out.strip().splitlines()
+    summary = json.loads(lines[-1])  # the last line is one JSON object
+    assert "cyl (cylinder)" in out and "box (box)" in out
+    for key in ("K_phi", "p_0", "phi_deg", "K_theory", "depth_over_R_max", "runs",
+                "slope_ratio"):
+        assert key in summary
+    first, second = summary["runs"]
+    assert first["label"] == "cyl (cylinder)" and second["label"] == "box (box)"
+    # The window leaves the nonlinear start out (it may reach into its last, nearly
+    # tangent part: the rule accepts what the scatter cannot tell from a line).
+    for r in (first, second):
+        assert r["window_rule"] == "auto"
+        assert 0.15 <= r["window"][0] <= 0.5
+        assert r["window"][1] == pytest.approx(1.05)
+        assert r["depth_over_R_max"] == pytest.approx(1.05)
+    # Tolerance from the scatter: the fit's standard errors for SIGMA on its window
+    # (about 0.1 for K, 0.07 for p_0); 4 of them, as the window may hold a little of the
+    # curved start (a bias of about 0.6 standard errors on average over many seeds).
+    se_k, se_p0 = se_expected(first["window"][0])
+    assert first["K_phi_stderr"] == pytest.approx(se_k, rel=0.5)  # the scatter is seen
+    assert summary["K_phi"] == first["K_phi"]
+    assert first["K_phi"] == pytest.approx(k_true, abs=4 * se_k)
+    assert first["p_0"] == pytest.approx(p0_true, abs=4 * se_p0)
+    se_k2, _ = se_expected(second["window"][0])
+    assert second["K_phi"] == pytest.approx(0.97 * k_true, abs=4 * se_k2)
+    assert summary["slope_ratio"] == pytest.approx(second["K_phi"] / first["K_phi"])
+    assert summary["slope_ratio"] == pytest.approx(0.97, abs=4 * np.hypot(se_k, se_k2) / k_true)
+    # Theory and implied angles.
+    assert summary["phi_deg"] == 26.8
+    assert summary["K_theory"] == pytest.approx(k_phi(26.8))
+    assert first["phi_implied_deg"] == pytest.approx(phi_for_k(first["K_phi"]))
+    assert summary["depth_over_R_max"] == pytest.approx(1.05)
+    assert Path(summary["png"]) == cyl / "intrusion.png"
+    assert (cyl / "intrusion.png").stat().st_size > 0
+
+
+def test_noise_free_window_starts_at_the_line(tmp_path, capsys):
+    run = write_run(tmp_path / "run", 23.0, 2.0, seed=0, sigma=0.0)
+    code, out, err = run_main(capsys, [run, "--phi", 26.0, "--png", tmp_path / "p.png"])
+    assert code == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert r["window"][0] == pytest.approx(X_T, abs=0.05)
+    assert r["K_phi"] == pytest.approx(23.0, rel=2e-3)  # --tol: 0.2 %
+    assert r["p_0"] == pytest.approx(2.0, abs=0.05)
+    assert "slope_ratio" not in r
+    assert (tmp_path / "p.png").is_file()
+
+
+def test_fixed_window_and_phi_from_file(tmp_path, capsys):
+    run = write_run(tmp_path / "run", 26.0, 3.0, seed=3)
+    (tmp_path / "phi.json").write_text(json.dumps({"phi_deg": 25.0, "std": 1.5}))
+    code, out, err = run_main(capsys, [run, "--phi-from", tmp_path / "phi.json",
+                                       "--from", 0.5])
+    assert code == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert r["phi_deg"] == 25.0 and r["K_theory"] == pytest.approx(k_phi(25.0))
+    assert r["runs"][0]["window"] == [0.5, pytest.approx(1.05)]
+    assert r["runs"][0]["window_rule"] == "fixed"
+    assert r["runs"][0]["rows_fitted"] == 23
+    se_k, se_p0 = se_expected(0.5)
+    assert r["K_phi"] == pytest.approx(26.0, abs=4 * se_k)
+    assert r["p_0"] == pytest.approx(3.0, abs=4 * se_p0)
+
+
+def test_missing_column_names_file_and_column(tmp_path, capsys):
+    cols = [c for c in COLUMNS if c != "force_normalized"]
+    run = write_run(tmp_path / "old", 26.0, 3.0, seed=0, columns=cols)
+    code, out, err = run_main(capsys, [run, "--phi", 26.8])
+    assert code == 2 and out == ""
+    assert str(run / "history.csv") in err and "'force_normalized'" in err
+
+
+def test_bad_inputs(tmp_path, capsys):
+    code, _, err = run_main(capsys, [tmp_path / "nowhere", "--phi", 26.8])
+    assert code == 2 and str(tmp_path / "nowhere" / "history.csv") in err
+    run = write_run(tmp_path / "run", 26.0, 3.0, seed=0)
+    (tmp_path / "phi.json").write_text("{}")
+    code, _, err = run_main(capsys, [run, "--phi-from", tmp_path / "phi.json"])
+    assert code == 2 and "phi.json" in err and "phi_deg" in err
+    code, _, err = run_main(capsys, [run, "--phi", 80.0])
+    assert code == 2 and "friction angle" in err
+    short = write_run(tmp_path / "short", 26.0, 3.0, seed=0, d_max=0.3)
+    code, _, err = run_main(capsys, [short, "--phi", 26.8])
+    assert code == 2 and "short" in err and "--min-span" in err
+
+
+def test_cut_last_row_is_dropped(tmp_path, capsys):
+    run = write_run(tmp_path / "run", 26.0, 3.0, seed=0)
+    path = run / "history.csv"
+    path.write_text(path.read_text() + "4500,3.1,0.5")  # a run killed mid-row
+    code, out, err = run_main(capsys, [run, "--phi", 26.8])
+    assert code == 0, err
+    assert json.loads(out.strip().splitlines()[-1])["depth_over_R_max"] == pytest.approx(1.05)
