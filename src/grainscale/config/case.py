@@ -291,6 +291,15 @@ HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_
 HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force")
 
 
+class ProbeCfg(StrictModel):
+    """An RVE written in full (spheres, contacts, cell) at every frame time: that of the
+    material point of a 'dem' material nearest `position` at the start, followed as it
+    moves (coupling/probes.py)."""
+    position: Vec3  # m, inside the grid
+    # file names probe_NAME_...; default probe0, probe1, ... (the index in the list)
+    name: Annotated[str, Field(pattern=r"^[A-Za-z0-9_-]+$", max_length=64)] | None = None
+
+
 class OutputCfg(StrictModel):
     interval: Pos  # s, between history rows (and frames)
     frame_interval: Pos | None = None  # s; default: interval
@@ -299,6 +308,14 @@ class OutputCfg(StrictModel):
     history: list[str] = ["time", "kinetic_energy"]  # columns after `step`
     axial_axis: Axis = "z"  # axial_strain = 1 - mean F_aa along this axis
     column: ColumnCfg | None = None
+    probes: list[ProbeCfg] = []  # [[output.probes]]: RVEs written at every frame time
+
+    @model_validator(mode="after")
+    def _probe_names(self):
+        for i, p in enumerate(self.probes):
+            if p.name is None:
+                p.name = f"probe{i}"  # written so in case.resolved.toml
+        return self
 
 
 class Case(StrictModel):
@@ -376,6 +393,37 @@ def check_case(case: Case) -> None:
     for k in ("start", "end"):
         if not math.isfinite(getattr(case.time, k)):
             raise ConfigError(f"time.{k} = {getattr(case.time, k)}: must be finite")
+    _check_probes(case)
+
+
+def _check_probes(case: Case) -> None:
+    """[[output.probes]]: a 'dem' material exists, positions inside the grid, names
+    unique. Which point each probe shows is resolved with the points (coupling/probes)."""
+    probes = case.output.probes
+    if not probes:
+        return
+    if not any(m.type == "dem" for m in case.materials.values()):
+        kinds = {n: m.type for n, m in case.materials.items()}
+        raise ConfigError(f"output.probes[0].position = {list(probes[0].position)}: a probe "
+                          "shows the RVE of a material point of a 'dem' material, and this "
+                          f"case has none (materials: {kinds}); valid: a case with a "
+                          "material of type = 'dem', or no [[output.probes]]")
+    g = case.grid
+    size = g.cell_size if isinstance(g.cell_size, tuple) else (g.cell_size,) * 3
+    lo = list(g.origin)
+    hi = [o + n * h for o, n, h in zip(g.origin, g.cells, size, strict=True)]
+    first: dict[str, int] = {}
+    for i, p in enumerate(probes):
+        if not all(a <= x <= b for a, x, b in zip(lo, p.position, hi, strict=True)):
+            raise ConfigError(f"output.probes[{i}].position = {list(p.position)}: outside the "
+                              f"grid; valid range {lo} .. {hi} (grid.origin .. grid.origin + "
+                              "grid.cells * grid.cell_size)")
+        if p.name in first:
+            raise ConfigError(f"output.probes[{i}].name = {p.name!r}: already the name of "
+                              f"output.probes[{first[p.name]}] (unnamed probes are called "
+                              "probe0, probe1, ... by their index); valid: a name no other "
+                              f"probe has, not one of {sorted(first)}")
+        first[p.name] = i
 
 
 def load_case(path) -> Case:

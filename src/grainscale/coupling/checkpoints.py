@@ -57,7 +57,8 @@ PARTS = "checkpoint.parts"
 # (`grainscale rve`, not this run) or outputs that do not touch history.csv.
 FREE = ("title", "time.end", "solver.threads", "solver.partition_seed",
         "solver.rebalance_every", "output.frames", "output.frame_interval",
-        "output.checkpoint_every", "triaxial", "undrained", "isotropic", "shear")
+        "output.checkpoint_every", "output.probes", "triaxial", "undrained", "isotropic",
+        "shear")
 # Keys that can never change on a resume: history.csv keeps the columns of its header.
 FIXED = ("output.history",)
 

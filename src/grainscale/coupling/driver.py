@@ -3,9 +3,11 @@
 Outputs in --out: `case.resolved.toml` (every default filled in, package version),
 `history.csv` (a row every output.interval, plus a final row when the run stops),
 `frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
-for a rigid body), `cost.json` (time per step split into MPM, DEM, communication,
-waiting and other), and a checkpoint (coupling/checkpoints.py) every N steps and at the
-end of the run when checkpointing is on (a new run first removes an earlier run's).
+for a rigid body), the probes' RVEs at the frame times (`probes.json`,
+`frames/probe_NAME_NNNNN_*.vtu` + `probe_NAME_*.pvd`, coupling/probes.py), `cost.json`
+(time per step split into MPM, DEM, communication, waiting and other), and a checkpoint
+(coupling/checkpoints.py) every N steps and at the end of the run when checkpointing is
+on (a new run first removes an earlier run's).
 `--resume` continues from the newest valid one (a damaged one is skipped with a
 warning) if the case still has its physics (checkpoints.check_case; --allow-changed
 names keys that may differ): history rows and frames written after it are dropped, so
@@ -35,6 +37,7 @@ from grainscale.config.case import Case, load_case
 from grainscale.coupling import checkpoints
 from grainscale.coupling import materials as dem_materials
 from grainscale.coupling.outputs import gather, history_values, point_fields
+from grainscale.coupling.probes import Probe, ProbeWriter, resolve
 from grainscale.coupling.rebalance import rebalance
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.distributed.comm import Comm, world
@@ -97,9 +100,10 @@ def format_cost(r: dict) -> str:
 
 
 # --------------------------------------------------------------------------- run
-def check_geometry(case: Case, case_dir: Path) -> None:
+def check_geometry(case: Case, case_dir: Path) -> list[Probe]:
     """All checks of the solver set-up (points in the grid, boxes that select nodes, ...)
-    before the packings of DEM materials are generated, which can take minutes."""
+    before the packings of DEM materials are generated, which can take minutes; returns
+    the points of the case's probes (coupling/probes.py)."""
     probe = case.model_copy(deep=True)
     for m in probe.materials.values():
         if m.type == "dem":
@@ -109,7 +113,7 @@ def check_geometry(case: Case, case_dir: Path) -> None:
         return KINDS["linear_elastic"](name, n, density=1.0, youngs_modulus=1.0,
                                        poisson_ratio=0.0)
 
-    build_state(probe, case_dir, material_factory=stand_in)
+    return resolve(case, build_state(probe, case_dir, material_factory=stand_in))
 
 
 def set_threads(case: Case, threads: int | None, comm: Comm) -> None:
@@ -169,10 +173,10 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     if resume:  # collective: every rank gets the same checkpoint, or the same error
         found = checkpoints.find(out, comm)
         checkpoints.check_case(found, record, list(allow_changed or []))
-    check_geometry(case, case_path.parent)  # every input check before long computations
+    probes = check_geometry(case, case_path.parent)  # every input check before long work
     try:
         return _run(case, record, case_path, out, comm, max_steps, steps_this_run, every,
-                    found, progress)
+                    found, progress, probes)
     except ConfigError:
         raise  # raised by every rank (see above): printed once by rank 0
     except OSError as err:  # disk full, folder not writable: every file is written
@@ -194,7 +198,7 @@ def run_case(case_path, out, *, max_steps: int | None = None,
 
 def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_steps,
          steps_this_run, every: int, found: checkpoints.Checkpoint | None,
-         progress: bool) -> int:
+         progress: bool, probes: list[Probe]) -> int:
     root = comm.root
     progress = progress and root
     factory = prepare_materials(case, case_path.parent, out, comm, progress)
@@ -232,6 +236,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
             history = History(out / "history.csv", columns, case.title)
             pvd = PVDSeries(out / "frames.pvd")
             rigid_pvd = PVDSeries(out / "rigid.pvd")
+    probe_writer = ProbeWriter(out, probes, comm, s.time if resume else None, progress)
 
     def write_row():
         view = gather(s)
@@ -239,6 +244,9 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
             history.write(history_values(case, s, *view))
 
     def write_frame(k: int):
+        probe_writer.write(s, k)  # collective, also without frames (output.frames)
+        if not o.frames:
+            return
         view = gather(s)
         if view is None:
             return
@@ -290,7 +298,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
                 last_row_step = s.step
                 while due(n_rows, o.interval):
                     n_rows += 1
-            if o.frames and due(n_frames, frame_dt):
+            if (o.frames or probes) and due(n_frames, frame_dt):
                 write_frame(n_frames)
                 while due(n_frames, frame_dt):
                     n_frames += 1

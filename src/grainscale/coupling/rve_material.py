@@ -134,6 +134,16 @@ class RVEMaterial:
                              "(cells were retiled); use .groups")
         return self.groups[0]
 
+    def rve(self, point: int) -> RVEBatch:
+        """A copy of the RVE of `point` (an index into this process's points of the
+        material), as a batch of one, found in whichever group it is now (retiling
+        moves an RVE to the group of its new sphere count)."""
+        for b, rows in zip(self.groups, self.rows, strict=True):
+            hit = np.flatnonzero(rows == point)
+            if hit.size:
+                return b.take(hit)
+        raise IndexError(f"material {self.name!r}: no RVE for point {point} here")
+
     def particle_counts(self) -> np.ndarray:
         """(P,) spheres of each point's RVE."""
         return self._per_point(lambda b: np.full(b.n_rve, b.n_particles))

@@ -55,9 +55,10 @@ class PVDSeries:
         self.entries: list[tuple[float, str]] = []
 
     @classmethod
-    def load(cls, path: str | Path, keep: int | None = None) -> PVDSeries:
+    def load(cls, path: str | Path, keep: int | None = None,
+             until: float | None = None) -> PVDSeries:
         """Read an existing series (cut back to its first `keep` entries, if it has
-        more) to continue it."""
+        more, and to the entries at times <= `until`) to continue it."""
         import xml.etree.ElementTree as ET
 
         s = cls(path)
@@ -65,6 +66,9 @@ class PVDSeries:
             root = ET.parse(s.path).getroot()
             for ds in root.iter("DataSet"):
                 s.entries.append((float(ds.get("timestep")), ds.get("file")))
+        if until is not None:
+            keep = min(len(s.entries) if keep is None else keep,
+                       sum(t <= until for t, _ in s.entries))
         if keep is not None and len(s.entries) > keep:  # (a series never begun stays so)
             s.entries = s.entries[:keep]
             s.write()
