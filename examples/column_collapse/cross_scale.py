@@ -1,20 +1,23 @@
 """Cross-scale consistency in flow: the multiscale column against a continuum carrying its
 RVE's own measured mu(I).
 
-    python examples/column_collapse/cross_scale.py --out DIR [--tiles 1]
-        [--pressures 200 800] [--inertial 0.003 ... 0.8] [--multiscale RUN]
+    python examples/column_collapse/cross_scale.py --out DIR [--case quick.toml]
+        [--tiles 1] [--pressures 200 800] [--inertial 0.003 ... 0.8] [--multiscale RUN]
 
-(a) `grainscale rve flow` on the RVE of `quick.toml` (same grains, contact law and
-    restitution) at the column's pressure range, fitting mu(I) in the continuum's
-    measure (DIR/flow.csv, DIR/flow.png, DIR/flow.mu_i.toml);
-(b) the mu(I) continuum with those parameters in `quick.toml`'s geometry: same grid,
+(a) `grainscale rve flow` on the RVE of the case (default `quick.toml`; same grains,
+    contact law and restitution) at the column's pressure range, fitting mu(I) in the
+    shear-cell measure (DIR/flow.csv, DIR/flow.png, DIR/flow.mu_i.toml);
+(b) the mu(I) continuum with those parameters in the case's geometry: same grid,
     points, boundaries, velocity update, geostatic stage and output (DIR/continuum);
-(c) the multiscale `quick.toml` itself (DIR/multiscale; or an existing finished run of
-    it given by --multiscale, whose case file must be quick.toml's).
-Writes DIR/cross_scale.png (runout and kinetic energy against t / tau_c, both runs) and
-DIR/results.json; the last printed line is one JSON object with `multiscale_runout` and
-`continuum_runout` (values at 7 tau_c) and their relative difference. A step already
-done in DIR (flow.csv, a finished run) is not repeated.
+(c) the multiscale case itself (DIR/multiscale; or an existing finished run of it given
+    by --multiscale);
+(d) the glass-bead mu(I) baseline of `mu_i.toml` (Jop's parameters) in the same geometry
+    (DIR/baseline), for reference.
+Writes DIR/cross_scale.png (runout and kinetic energy against t / tau_c, every run) and
+DIR/results.json; the last printed line is one JSON object with `multiscale_runout`,
+`continuum_runout` and `baseline_runout` (values at 7 tau_c) and the relative difference
+of the first two. A step already done in DIR (flow.csv, a finished run) is not repeated.
+`--case fine.toml --multiscale RUN` compares a finished run of the 5 mm column.
 """
 
 from __future__ import annotations
@@ -36,14 +39,14 @@ sys.path.insert(0, str(HERE))
 from convergence import experiment_bands, measures, read_history, run_one  # noqa: E402
 
 
-def measure_flow(out: Path, tiles: int, pressures: list[float],
+def measure_flow(case: Path, out: Path, tiles: int, pressures: list[float],
                  inertial: list[float]) -> dict:
-    """(a): the fitted [materials.rve_fit] table of quick.toml's RVE."""
+    """(a): the fitted [materials.sand] table of the case's RVE."""
     from grainscale.cli import main as grainscale
 
     table = out / "flow.mu_i.toml"
     if not table.is_file():
-        code = grainscale(["rve", "flow", str(HERE / "quick.toml"), "--tiles", str(tiles),
+        code = grainscale(["rve", "flow", str(case), "--tiles", str(tiles),
                            "--pressure", *map(str, pressures),
                            "--inertial", *map(str, inertial), "--material", "sand",
                            "--out", str(out / "flow.csv"), "--plot", str(out / "flow.png"),
@@ -53,39 +56,48 @@ def measure_flow(out: Path, tiles: int, pressures: list[float],
     return tomllib.loads(table.read_text())["materials"]["sand"]
 
 
-def continuum_case(material: dict) -> dict:
-    """(b): quick.toml with its DEM material replaced by the fitted mu(I) continuum."""
-    case = tomllib.loads((HERE / "quick.toml").read_text())
+def continuum_case(path: Path, material: dict, title: str) -> dict:
+    """(b), (d): the case with its DEM material replaced by a mu(I) continuum."""
+    case = tomllib.loads(path.read_text())
     del case["rve"]
     case["materials"] = {"sand": material}
-    case["title"] = "column collapse, a = 0.6, mu(I) fitted to quick.toml's RVE"
+    case["title"] = f"column collapse, a = 0.6, {title}"
     case["output"]["checkpoint_every"] = 0
     dem_only = {"porosity", "coordination", "mean_rotation"}
     case["output"]["history"] = [c for c in case["output"]["history"] if c not in dem_only]
     return case
 
 
-def run_multiscale(out: Path, given: Path | None) -> Path:
-    """(c): the run directory of the multiscale quick column."""
+def run_multiscale(path: Path, out: Path, given: Path | None) -> Path:
+    """(c): the run directory of the multiscale column."""
+    case = tomllib.loads(path.read_text())
     if given is not None:
         hist = read_history(given / "history.csv")
-        end = tomllib.loads((HERE / "quick.toml").read_text())["time"]["end"]
+        end = case["time"]["end"]
         if hist["time"][-1] < end - 1e-9:
             raise SystemExit(f"--multiscale {given}: the run has not reached t = {end} s")
+        resolved = given / "case.resolved.toml"
+        if resolved.is_file():
+            ran = tomllib.loads(resolved.read_text())
+            keys = ("cell_size", "cells")
+            if any(ran["grid"][k] != case["grid"][k] for k in keys):
+                raise SystemExit(f"--multiscale {given}: its grid is not {path.name}'s "
+                                 f"({[ran['grid'][k] for k in keys]} against "
+                                 f"{[case['grid'][k] for k in keys]})")
         return given
-    case = tomllib.loads((HERE / "quick.toml").read_text())
     run_one(case, out / "multiscale")
     return out / "multiscale" / "run"
 
 
-def plot(hs: dict, png: Path) -> None:
+def plot(hs: dict, png: Path, name: str) -> None:
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for (label, h), style in zip(hs.items(), ("-", "--"), strict=True):
+    styles = (("-", "k"), ("--", "k"), ("-.", "tab:grey"))
+    for (label, h), (style, colour) in zip(hs.items(), styles, strict=True):
         after = h["t_over_tc"] >= 0
         t = h["t_over_tc"][after]
-        ax.plot(t, h["runout_ratio"][after], style, color="k", label=label)
+        ax.plot(t, h["runout_ratio"][after], style, color=colour, label=label)
         ke = h["kinetic_energy"][after]
-        bx.plot(t, ke / max(ke.max(), 1e-300), style, color="k", label=label)
+        bx.plot(t, ke / max(ke.max(), 1e-300), style, color=colour, label=label)
     experiment_bands(ax)
     ax.set(xlabel="t / tau_c", ylabel="(L - L_i) / L_i", xlim=(0, 7))
     ax.set_ylim(bottom=0)
@@ -93,7 +105,7 @@ def plot(hs: dict, png: Path) -> None:
     for b in (ax, bx):
         b.grid(alpha=0.3)
         b.legend(fontsize=8)
-    fig.suptitle("column collapse a = 0.6 (quick.toml): multiscale vs its RVE's mu(I)")
+    fig.suptitle(f"column collapse a = 0.6 ({name}): multiscale vs its RVE's mu(I)")
     fig.tight_layout()
     fig.savefig(png, dpi=120)
     plt.close(fig)
@@ -102,29 +114,42 @@ def plot(hs: dict, png: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--case", type=Path, default=HERE / "quick.toml",
+                    help="the multiscale column case (default quick.toml beside this script)")
     ap.add_argument("--tiles", type=int, default=1, help="supercell of the flow measurement")
     ap.add_argument("--pressures", type=float, nargs="+", default=[200.0, 800.0],
                     help="normal stresses of the flow measurement [Pa] (the column's range)")
     ap.add_argument("--inertial", type=float, nargs="+",
                     default=[0.003, 0.01, 0.03, 0.1, 0.2, 0.4, 0.8])
     ap.add_argument("--multiscale", type=Path, default=None,
-                    help="a finished run of quick.toml to use instead of running it")
+                    help="a finished run of the case to use instead of running it")
     args = ap.parse_args()
+    if not args.case.is_file():
+        raise SystemExit(f"--case {args.case}: no such file")
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    material = measure_flow(args.out, args.tiles, args.pressures, args.inertial)
+    material = measure_flow(args.case, args.out, args.tiles, args.pressures, args.inertial)
     print(f"(a) fitted mu(I): mu_s {material['mu_s']}, mu_2 {material['mu_2']}, "
           f"I_0 {material['I_0']} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    wall_c = run_one(continuum_case(material), args.out / "continuum")
+    wall_c = run_one(continuum_case(args.case, material, "mu(I) fitted to its RVE"),
+                     args.out / "continuum")
     print(f"(b) continuum run: {wall_c:.0f} s", flush=True)
-    ms = run_multiscale(args.out, args.multiscale)
-    hs = {"multiscale (quick.toml)": read_history(ms / "history.csv"),
+    ms = run_multiscale(args.case, args.out, args.multiscale)
+    beads = tomllib.loads((HERE / "mu_i.toml").read_text())["materials"]["beads"]
+    wall_b = run_one(continuum_case(args.case, beads, "glass-bead mu(I) of mu_i.toml"),
+                     args.out / "baseline")
+    print(f"(d) glass-bead baseline run: {wall_b:.0f} s", flush=True)
+    hs = {f"multiscale ({args.case.name})": read_history(ms / "history.csv"),
           "mu(I) continuum, fitted to the RVE":
-              read_history(args.out / "continuum" / "run" / "history.csv")}
-    plot(hs, args.out / "cross_scale.png")
-    m_ms, m_c = (measures(h) for h in hs.values())
-    result = {"multiscale_runout": round(m_ms["runout"], 4),
+              read_history(args.out / "continuum" / "run" / "history.csv"),
+          "glass-bead mu(I) (mu_i.toml)":
+              read_history(args.out / "baseline" / "run" / "history.csv")}
+    plot(hs, args.out / "cross_scale.png", args.case.name)
+    m_ms, m_c, m_b = (measures(h) for h in hs.values())
+    result = {"case": args.case.name,
+              "multiscale_runout": round(m_ms["runout"], 4),
               "continuum_runout": round(m_c["runout"], 4),
+              "baseline_runout": round(m_b["runout"], 4),
               "relative_difference": round(m_ms["runout"] / m_c["runout"] - 1.0, 4),
               "multiscale_height_ratio": round(m_ms["height_ratio"], 4),
               "continuum_height_ratio": round(m_c["height_ratio"], 4),
@@ -134,7 +159,6 @@ def main() -> None:
               "tiles": args.tiles, "wall_s": round(time.perf_counter() - t0)}
     (args.out / "results.json").write_text(json.dumps(result, indent=1))
     print(json.dumps(result))
-
 
 if __name__ == "__main__":
     main()
