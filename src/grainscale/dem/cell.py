@@ -17,15 +17,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from grainscale.linalg3 import det3
+
 
 @njit(cache=True)
 def perpendicular_widths(h: np.ndarray) -> np.ndarray:
     """Distance between each pair of opposite faces [m]: w_k = det h / |a_i x a_j|."""
     out = np.empty(3)
-    # explicit determinant: numba's np.linalg needs SciPy, which is not a dependency
-    vol = abs(h[0, 0] * (h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1])
-              - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
-              + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
+    vol = abs(det3(h))
     for k in range(3):
         i = (k + 1) % 3
         j = (k + 2) % 3

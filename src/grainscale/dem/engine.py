@@ -14,7 +14,14 @@ import numpy as np
 from numba import njit, prange
 
 from grainscale.config.rve import Numerics
-from grainscale.dem.kernel import advance_batch, contact_pass
+from grainscale.dem.kernel import (
+    ContactLaw,
+    Controls,
+    RveState,
+    advance_batch,
+    contact_pass,
+    rve_state,
+)
 from grainscale.dem.neighbours import Status, build
 from grainscale.dem.state import RVEBatch, grow_capacity
 
@@ -140,6 +147,18 @@ def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps, dt: float) -> Con
                    np.zeros(r), e_step=_expm_small(log_step), l_mean=log_step / dt)
 
 
+def contact_law(params: ContactParams) -> ContactLaw:
+    """The kernels' ContactLaw of a ContactParams."""
+    return ContactLaw(float(params.young), float(params.stiffness_ratio),
+                      float(params.friction), float(params.gamma), float(params.damping),
+                      float(params.skin))
+
+
+def rve_arrays(batch: RVEBatch) -> RveState:
+    """The kernels' RveState of a batch: its arrays, not copies."""
+    return RveState._make(getattr(batch, name) for name in RveState._fields)
+
+
 def critical_dt(batch: RVEBatch, params: ContactParams,
                 safety: float = Numerics().timestep_safety) -> float:
     """safety x sqrt(m_min / k_max), k_max = E r_max (the stiffest possible contact) [s]."""
@@ -157,17 +176,13 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
     e_step = control.e_step if control.e_step is not None else np.broadcast_to(
         np.eye(3), (r, 3, 3)).copy()
     l_mean = control.l_mean if control.l_mean is not None else np.zeros((r, 3, 3))
+    law = contact_law(params)
+    ctl = Controls(float(dt), e_step, l_mean, control.hdot_fixed, control.l_ctrl,
+                   control.servo_mask, control.servo_target, float(control.servo_gain),
+                   max_rate)
     while remaining.max() > 0:
-        advance_batch(remaining, dt, params.young, params.stiffness_ratio, params.friction,
-                      params.gamma, params.damping, params.skin, batch.h, batch.s, batch.v, batch.w,
-                      batch.rot, batch.radius, batch.mass, batch.inertia, batch.L,
-                      batch.stress, batch.stress_servo, batch.stiffness, batch.step_count,
-                      batch.nbr_j, batch.nbr_shift,
-                      batch.nbr_count, batch.ft, batch.s_ref, batch.h_ref,
-                      batch.need_rebuild, batch.force, batch.torque, batch.x, batch.link,
-                      batch.wrapv, e_step, l_mean, control.hdot_fixed, control.l_ctrl,
-                      control.servo_mask,
-                      control.servo_target, control.servo_gain, max_rate, status, out)
+        # the state is read afresh each pass: a capacity regrowth replaces its arrays
+        advance_batch(remaining, law, rve_arrays(batch), ctl, status, out)
         done = out[:, 4].astype(np.int64)
         remaining -= done
         moved = done > 0  # an RVE that took no step in this call keeps its outputs
@@ -232,25 +247,21 @@ def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True, parallel=True)
-def _refresh(young, kt_ratio, friction, gamma, skin, h, s, v, w, radius, mass, L, stress,
-             stiffness, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild, force,
-             torque, x, link, wrapv, status, out):
-    for r in prange(s.shape[0]):
+def _refresh(law, st, status, out):
+    for r in prange(st.s.shape[0]):
+        one = rve_state(st, r)
         status[r] = Status.OK
-        if need_rebuild[r] != 0:
-            st, needed = build(h[r], s[r], radius[r], nbr_j[r], nbr_shift[r],
-                               nbr_count[r], ft[r], s_ref[r], h_ref[r], link[r], wrapv[r],
-                               x[r], skin)
+        if one.need_rebuild[0] != 0:
+            code, needed = build(one.h, one.s, one.radius, one.nbr_j, one.nbr_shift,
+                                 one.nbr_count, one.ft, one.s_ref, one.h_ref, one.link,
+                                 one.wrapv, one.x, law.skin)
             out[r, 3] = needed
-            status[r] = st
-            if st != Status.OK:
+            status[r] = code
+            if code != Status.OK:
                 continue
-            need_rebuild[r] = 0
+            one.need_rebuild[0] = 0
         table = np.empty((27, 3))
-        nc, _ = contact_pass(0.0, young, kt_ratio, friction, gamma, h[r], s[r], v[r], w[r],
-                             radius[r], mass[r], L[r], nbr_j[r], nbr_shift[r], nbr_count[r],
-                             ft[r], force[r], torque[r], x[r], table, stress[r],
-                             stiffness[r], True)
+        nc, _ = contact_pass(0.0, law, one, table, one.stress, one.stiffness, True)
         out[r, 0] = nc
 
 
@@ -258,13 +269,9 @@ def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
     """Recompute forces, stress and stiffness of the current configuration (no motion)."""
     status = np.zeros(batch.n_rve, np.int64)
     out = np.zeros((batch.n_rve, 5))
+    law = contact_law(params)
     while True:
-        _refresh(params.young, params.stiffness_ratio, params.friction, params.gamma,
-                 params.skin, batch.h, batch.s, batch.v, batch.w, batch.radius, batch.mass,
-                 batch.L, batch.stress,
-                 batch.stiffness, batch.nbr_j, batch.nbr_shift, batch.nbr_count, batch.ft,
-                 batch.s_ref, batch.h_ref, batch.need_rebuild, batch.force, batch.torque,
-                 batch.x, batch.link, batch.wrapv, status, out)
+        _refresh(law, rve_arrays(batch), status, out)
         _check(batch, status, out)
         if not np.any(status == Status.OVERFLOW):
             break

@@ -4,8 +4,9 @@ One compiled call advances R RVEs by their own number of steps, `prange` over RV
 work of one RVE never touches another's arrays, so an RVE alone and the same RVE inside
 a batch follow the same arithmetic. Nothing is allocated per step.
 
-Per step of one RVE (dt fixed):
-1. cell control: h_new = E h + dt (hdot_fixed + L_c h), with E a fixed step map (the
+Per step of one RVE (dt fixed), in the order the code runs:
+1. neighbour list: rebuilt first if the last step's check (7) flagged it.
+2. cell control: h_new = E h + dt (hdot_fixed + L_c h), with E a fixed step map (the
    MPM increment: exp(log(I + dH)/n)) and L_c = L_ctrl except that each servo-controlled
    component is replaced by
    L_kk = g (sigma*_kk - sigma_kk) / (C_kk dt) on the diagonal and, for a shear pair,
@@ -13,25 +14,34 @@ Per step of one RVE (dt fixed):
    where C_ab = (1/V) sum kn |d|^2 n_a^2 n_b^2 is the affine stiffness of the last step;
    the mean-field velocity gradient is L = L_mean + (hdot_fixed + L_c h) h^-1, where
    L_mean = log(E)/dt is the exact rate of the step map (skew for a rotation).
-2. contacts over the half list (seed Eq. 7-10): kn = E r*, r* = 2 ri rj/(ri + rj),
-   kt = ratio kn; f_n = kn delta; tangential force history rotated with the contact
-   frame, incremented by kt v_t dt and capped at mu f_n. The relative velocity includes
-   the mean-field term D d across periodic images (D = sym L: the mean field carries a
-   pair rigidly with its spin W = skew L, which only turns the contact frame), and
-   particle spins w are fluctuations about W; a rigidly rotating cell therefore makes no
-   slip at any contact (objectivity).
-3. Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
+3. contacts over the half list, in the current cell h (seed Eq. 7-10): kn = E r*,
+   r* = 2 ri rj/(ri + rj), kt = ratio kn; f_n = kn delta; tangential force history
+   rotated with the contact frame, incremented by kt v_t dt and capped at mu f_n. The
+   relative velocity includes the mean-field term D d across periodic images (D = sym L:
+   the mean field carries a pair rigidly with its spin W = skew L, which only turns the
+   contact frame), and particle spins w are fluctuations about W; a rigidly rotating
+   cell therefore makes no slip at any contact (objectivity).
+4. in the same pass over the contacts, on servo samples and on the last step of a call:
+   Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
    first particle and d = x_j - x_i, so compression is negative (tension positive), minus
    the kinetic stress (1/V) sum m v' (x) v' of the fluctuating velocities v', and
-   the affine stiffness C_ab, on servo samples and on the last step of a call. Without
-   a servo, `stiffness` holds the last step's C (the MPM's wave speed reads it).
-4. leapfrog with Cundall's local non-viscous damping on the fluctuating motion and the
+   the affine stiffness C_ab. Without a servo, `stiffness` holds the last step's C (the
+   MPM's wave speed reads it).
+5. h <- h_new, and h_new^-1 for 6.
+6. leapfrog with Cundall's local non-viscous damping on the fluctuating motion and the
    pseudo-force of the co-moving frame (SLLOD): v += dt (F - alpha |F| sign v)/m
    - dt L v, rotation without it (spins are about W); s += h_new^-1 v dt;
    accumulated rotation += |w| dt.
-5. h <- h_new; flag a list rebuild when 2 max|u'| + |h h_ref^-1 - I|_F cutoff >= skin
-   (u' = h (s - s_ref) the fluctuating displacement since the build, bounded by
-   sqrt(|h|_1 |h|_inf) |s - s_ref|): no pair can then have entered the cutoff unseen.
+7. list check: flag a rebuild (done at 1 of the next step) when
+   2 max|u'| + |h h_ref^-1 - I|_F cutoff >= skin (u' = h (s - s_ref) the fluctuating
+   displacement since the build, bounded by sqrt(|h|_1 |h|_inf) |s - s_ref|): no pair
+   can then have entered the cutoff unseen.
+
+The kernels take their arguments as three named tuples: `RveState` (the arrays of the
+RVEs, state and scratch), `ContactLaw` (the constants of the contact law, damping and
+skin) and `Controls` (the time step and the cell control of a call). The batch kernel
+gets them with a leading RVE axis and hands each RVE its slices (`rve_state`,
+`rve_controls`).
 
 Finiteness is not tested here: fastmath lets LLVM assume that no value is NaN or
 infinite, so such a test may be folded away (an `isfinite` of the kinetic energy was,
@@ -45,32 +55,94 @@ letting the NaN through to that check.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 from grainscale.dem.neighbours import Status, build, image_table
+from grainscale.linalg3 import det3, inv3
 
 SERVO_EVERY = 4  # steps between stress samples of a servo
 
 
+class RveState(NamedTuple):
+    """The arrays of the RVEs the kernels read and write, named as in state.RVEBatch (see
+    there for units). In a batch every array has the RVE index first; `rve_state` slices
+    one RVE out, with step_count and need_rebuild as views of length 1 so that the
+    kernel's writes reach the batch."""
+
+    h: np.ndarray             # cell matrix, edge vectors as columns
+    s: np.ndarray             # fractional positions
+    v: np.ndarray             # fluctuating velocities
+    w: np.ndarray             # angular velocities about the mean-field spin
+    rot: np.ndarray           # accumulated rolling angles
+    radius: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    L: np.ndarray             # mean-field velocity gradient of the last step
+    stress: np.ndarray        # Love-Weber stress (last step of a call)
+    stress_servo: np.ndarray  # the stress the servo last sampled
+    stiffness: np.ndarray     # affine stiffness C_ab
+    step_count: np.ndarray    # steps taken
+    nbr_j: np.ndarray         # neighbour list: index, image shift code, row lengths
+    nbr_shift: np.ndarray
+    nbr_count: np.ndarray
+    ft: np.ndarray            # tangential force history
+    s_ref: np.ndarray         # positions and cell at the last list build
+    h_ref: np.ndarray
+    need_rebuild: np.ndarray  # 1: build the list before the next step
+    force: np.ndarray         # scratch: forces, torques, Cartesian positions, cell-list
+    torque: np.ndarray        # links, image counts of the last wrap
+    x: np.ndarray
+    link: np.ndarray
+    wrapv: np.ndarray
+
+
+class ContactLaw(NamedTuple):
+    """Constants of the contact law (seed Eq. 7-10), the damping and the Verlet skin; the
+    same for every RVE of a batch (engine.ContactParams)."""
+
+    young: float     # E [Pa]; kn = E r*
+    kt_ratio: float  # kt / kn
+    friction: float  # mu
+    gamma: float     # damping ratio of the normal dashpot (0: elastic)
+    damping: float   # Cundall local non-viscous damping coefficient
+    skin: float      # Verlet skin [m]
+
+
+class Controls(NamedTuple):
+    """Time step and cell control of a call (engine.Control, resolved). In a batch the
+    arrays have the RVE index first and max_rate is (R,); `rve_controls` slices one RVE
+    out (max_rate then a float)."""
+
+    dt: float                 # [s]
+    e_step: np.ndarray        # (3,3) per-step map of the cell [-]
+    l_mean: np.ndarray        # (3,3) its velocity gradient log(e_step)/dt [1/s]
+    hdot_fixed: np.ndarray    # (3,3) [m/s]
+    l_ctrl: np.ndarray        # (3,3) [1/s]
+    servo_mask: np.ndarray    # (3,3) int32, upper triangle read
+    servo_target: np.ndarray  # (3,3) [Pa]
+    servo_gain: float
+    max_rate: float           # [1/s]
+
+
 @njit(cache=True, inline="always")
-def _inv3(a, out):
-    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
-    inv = 1.0 / det
-    out[0, 0] = c00 * inv
-    out[1, 0] = c01 * inv
-    out[2, 0] = c02 * inv
-    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * inv
-    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * inv
-    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * inv
-    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * inv
-    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * inv
-    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * inv
-    return det
+def rve_state(st, r):
+    """The RveState of RVE r of a batch's RveState (views, nothing copied)."""
+    return RveState(st.h[r], st.s[r], st.v[r], st.w[r], st.rot[r], st.radius[r], st.mass[r],
+                    st.inertia[r], st.L[r], st.stress[r], st.stress_servo[r],
+                    st.stiffness[r], st.step_count[r:r + 1], st.nbr_j[r], st.nbr_shift[r],
+                    st.nbr_count[r], st.ft[r], st.s_ref[r], st.h_ref[r],
+                    st.need_rebuild[r:r + 1], st.force[r], st.torque[r], st.x[r],
+                    st.link[r], st.wrapv[r])
+
+
+@njit(cache=True, inline="always")
+def rve_controls(ctl, r):
+    """The Controls of RVE r of a batch's Controls."""
+    return Controls(ctl.dt, ctl.e_step[r], ctl.l_mean[r], ctl.hdot_fixed[r], ctl.l_ctrl[r],
+                    ctl.servo_mask[r], ctl.servo_target[r], ctl.servo_gain, ctl.max_rate[r])
 
 
 @njit(cache=True, inline="always")
@@ -80,10 +152,9 @@ def _sgn(a):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass, L, nbr_j,
-                 nbr_shift, nbr_count, ft, force, torque, x, table, stress_out, stiff_out,
-                 homogenise):
-    """Contact forces and torques of one RVE at its current configuration.
+def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
+    """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
+    configuration; table is (27,3) scratch for the image shifts.
 
     Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
     c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
@@ -95,6 +166,10 @@ def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass,
     stiffness C_ab, Pa); skipping them saves a third of the work per contact. Returns
     (number of contacts, sum of normal contact forces [N]).
     """
+    young, kt_ratio, friction, gamma = law.young, law.kt_ratio, law.friction, law.gamma
+    h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
+    nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
+    force, torque, x = st.force, st.torque, st.x
     n = s.shape[0]
     for i in range(n):
         for d in range(3):
@@ -261,10 +336,7 @@ def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass,
         szx -= mi * u2 * u0
         szy -= mi * u2 * u1
         szz -= mi * u2 * u2
-    vol = (h[0, 0] * (h[1, 1] * h[2, 2] - h[1, 2] * h[2, 1])
-           - h[0, 1] * (h[1, 0] * h[2, 2] - h[1, 2] * h[2, 0])
-           + h[0, 2] * (h[1, 0] * h[2, 1] - h[1, 1] * h[2, 0]))
-    iv = 1.0 / vol
+    iv = 1.0 / det3(h)
     stress_out[0, 0] = sxx * iv
     stress_out[0, 1] = sxy * iv
     stress_out[0, 2] = sxz * iv
@@ -284,18 +356,21 @@ def contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius, mass,
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
-                h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo, stiffness,
-                step_count,
-                nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, need_rebuild,
-                force, torque, x, link, wrapv,
-                e_step, l_mean, hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
-                max_rate, out):
-    """Advance one RVE by `nsteps` steps of dt [s]; see the module docstring.
+def advance_rve(nsteps, law, st, ctl, out):
+    """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
+    ctl.dt [s]; see the module docstring.
 
     `out` (5,) receives: contacts, unbalanced-force ratio, kinetic energy [J], the row
     length a list build asked for, steps done. Returns a status code (0 = ok).
     """
+    dt, damping, skin = ctl.dt, law.damping, law.skin
+    h, s, v, w, rot, L = st.h, st.s, st.v, st.w, st.rot, st.L
+    radius, mass, inertia = st.radius, st.mass, st.inertia
+    stress, stress_servo, stiffness = st.stress, st.stress_servo, st.stiffness
+    force, torque = st.force, st.torque
+    step_count, need_rebuild, s_ref, h_ref = st.step_count, st.need_rebuild, st.s_ref, st.h_ref
+    servo_mask, servo_target, max_rate = ctl.servo_mask, ctl.servo_target, ctl.max_rate
+    hdot_fixed, e_step, l_mean = ctl.hdot_fixed, ctl.e_step, ctl.l_mean
     n = s.shape[0]
     table = np.empty((27, 3))
     hdot = np.empty((3, 3))
@@ -322,18 +397,19 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
             if servo_mask[a, b] != 0:
                 servo_on = True
     for _step in range(nsteps):
+        # 1. neighbour list, if the last step's check (7) asked for it
         if need_rebuild[0] != 0:
-            st, needed = build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref,
-                               h_ref, link, wrapv, x, skin)
+            code, needed = build(h, s, radius, st.nbr_j, st.nbr_shift, st.nbr_count, st.ft,
+                                 s_ref, h_ref, st.link, st.wrapv, st.x, skin)
             out[3] = needed
-            if st != Status.OK:
-                status = st
+            if code != Status.OK:
+                status = code
                 break
             need_rebuild[0] = 0
-        # 1. cell control
+        # 2. cell control: h_new, and L from the current cell's inverse
         for a in range(3):
             for b in range(3):
-                lc[a, b] = l_ctrl[a, b]
+                lc[a, b] = ctl.l_ctrl[a, b]
         for a in range(3):
             for b in range(a, 3):
                 if servo_mask[a, b] == 0:
@@ -341,7 +417,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
                 err = servo_target[a, b] - 0.5 * (stress_servo[a, b] + stress_servo[b, a])
                 c = stiffness[a, b] if a == b else 2.0 * stiffness[a, b]
                 if c > 0.0:
-                    rate = servo_gain * err / (c * dt)
+                    rate = ctl.servo_gain * err / (c * dt)
                 else:  # no contacts yet: move at the largest rate toward the target
                     rate = max_rate if err > 0.0 else -max_rate
                 rate = min(max(rate, -max_rate), max_rate)
@@ -353,12 +429,12 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
                     + lc[a, 2] * h[2, b]
                 hnew[a, b] = e_step[a, 0] * h[0, b] + e_step[a, 1] * h[1, b] \
                     + e_step[a, 2] * h[2, b] + dt * hdot[a, b]
-        _inv3(h, hinv)
+        inv3(h, hinv)
         for a in range(3):
             for b in range(3):
                 L[a, b] = l_mean[a, b] + hdot[a, 0] * hinv[0, b] + hdot[a, 1] * hinv[1, b] \
                     + hdot[a, 2] * hinv[2, b]
-        # 2-3. contacts, and the stress the caller needs (last step) or the servo reads.
+        # 3-4. contacts, and the stress the caller needs (last step) or the servo reads.
         # The servo samples its own copy every SERVO_EVERY steps of the RVE's life (a
         # delay far shorter than the stress response, tens of steps) and keeps L in
         # between; counting on the RVE's steps, not the call's, makes a run independent
@@ -371,18 +447,16 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
         # last step homogenises anyway: the write costs nothing
         report = sample or (last and not servo_on)
         stiff_out = stiffness if report else stiff_scratch
-        ncontact, fsum = contact_pass(dt, young, kt_ratio, friction, gamma, h, s, v, w, radius,
-                                      mass, L, nbr_j, nbr_shift, nbr_count, ft, force, torque,
-                                      x, table, sig_out, stiff_out, sample or last)
+        ncontact, fsum = contact_pass(dt, law, st, table, sig_out, stiff_out, sample or last)
         if sample and last:
             stress[:, :] = stress_servo
         step_count[0] += 1
-        # 5 (first half). new cell, its inverse for the position update
+        # 5. new cell, its inverse for the position update
         for a in range(3):
             for b in range(3):
                 h[a, b] = hnew[a, b]
-        _inv3(h, hinv)
-        # 4. integration (damping opposes the fluctuating velocity, seed's YADE style)
+        inv3(h, hinv)
+        # 6. integration (damping opposes the fluctuating velocity, seed's YADE style)
         umax2 = 0.0
         fres = 0.0
         ekin = 0.0
@@ -423,7 +497,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
             e1 = s[i, 1] - s_ref[i, 1]
             e2 = s[i, 2] - s_ref[i, 2]
             umax2 = max(umax2, e0 * e0 + e1 * e1 + e2 * e2)
-        # 5 (second half). is the list still complete? |h ds| <= |h|_2 |ds| and
+        # 7. is the list still complete? |h ds| <= |h|_2 |ds| and
         # |h|_2 <= sqrt(|h|_1 |h|_inf) bound the fluctuating displacement cheaply
         n1 = max(abs(h[0, 0]) + abs(h[1, 0]) + abs(h[2, 0]),
                  abs(h[0, 1]) + abs(h[1, 1]) + abs(h[2, 1]),
@@ -432,7 +506,7 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
                    abs(h[1, 0]) + abs(h[1, 1]) + abs(h[1, 2]),
                    abs(h[2, 0]) + abs(h[2, 1]) + abs(h[2, 2]))
         umax2 *= n1 * ninf
-        _inv3(h_ref, hinv)
+        inv3(h_ref, hinv)
         e2sum = 0.0
         for a in range(3):
             for b in range(3):
@@ -452,19 +526,11 @@ def advance_rve(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
 
 
 @njit(cache=True, parallel=True)
-def advance_batch(nsteps, dt, young, kt_ratio, friction, gamma, damping, skin,
-                  h, s, v, w, rot, radius, mass, inertia, L, stress, stress_servo,
-                  stiffness, step_count, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
-                  need_rebuild, force, torque, x, link, wrapv,
-                  e_step, l_mean, hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
-                  max_rate, status, out):
-    """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs."""
-    for r in prange(s.shape[0]):
-        status[r] = advance_rve(
-            nsteps[r], dt, young, kt_ratio, friction, gamma, damping, skin,
-            h[r], s[r], v[r], w[r], rot[r], radius[r], mass[r], inertia[r], L[r],
-            stress[r], stress_servo[r], stiffness[r], step_count[r:r + 1], nbr_j[r],
-            nbr_shift[r], nbr_count[r], ft[r],
-            s_ref[r], h_ref[r], need_rebuild[r:r + 1], force[r], torque[r], x[r],
-            link[r], wrapv[r], e_step[r], l_mean[r], hdot_fixed[r], l_ctrl[r],
-            servo_mask[r], servo_target[r], servo_gain, max_rate[r], out[r])
+def advance_batch(nsteps, law, st, ctl, status, out):
+    """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs.
+
+    st and ctl hold the batch's arrays (RVE index first); status (R,) receives each RVE's
+    status code and out (R,5) its outputs (see advance_rve).
+    """
+    for r in prange(st.s.shape[0]):
+        status[r] = advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r), out[r])

@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
+from grainscale.linalg3 import det3
 from grainscale.mpm.parallel import CHUNK, parallel_for
 
 HEADROOM = 62  # bits available to a nodal sum (int64 has 63 plus sign)
@@ -210,10 +211,7 @@ def _vgrad_point(p, vgrid, base, w, dw, nx, ny, ns, dt, dH, F, vol0, vol):
         F[p, 0, b] = f0 + h00 * f0 + h01 * f1 + h02 * f2
         F[p, 1, b] = f1 + h10 * f0 + h11 * f1 + h12 * f2
         F[p, 2, b] = f2 + h20 * f0 + h21 * f1 + h22 * f2
-    J = (F[p, 0, 0] * (F[p, 1, 1] * F[p, 2, 2] - F[p, 1, 2] * F[p, 2, 1])
-         - F[p, 0, 1] * (F[p, 1, 0] * F[p, 2, 2] - F[p, 1, 2] * F[p, 2, 0])
-         + F[p, 0, 2] * (F[p, 1, 0] * F[p, 2, 1] - F[p, 1, 1] * F[p, 2, 0]))
-    vol[p] = J * vol0[p]
+    vol[p] = det3(F[p]) * vol0[p]
 
 
 @njit(cache=True, fastmath=True, nogil=True)

@@ -26,6 +26,8 @@ from typing import Protocol
 import numpy as np
 from numba import njit
 
+from grainscale.linalg3 import inv3
+
 
 class Material(Protocol):
     name: str
@@ -82,22 +84,17 @@ def rotate_objective(dH, sig, out, A, B):
     w01 = 0.5 * (dH[0, 1] - dH[1, 0])
     w02 = 0.5 * (dH[0, 2] - dH[2, 0])
     w12 = 0.5 * (dH[1, 2] - dH[2, 1])
-    # M = I - W/2 (W antisymmetric: W01 = w01, W10 = -w01, ...)
-    m00, m01, m02 = 1.0, -0.5 * w01, -0.5 * w02
-    m10, m11, m12 = 0.5 * w01, 1.0, -0.5 * w12
-    m20, m21, m22 = 0.5 * w02, 0.5 * w12, 1.0
-    det = (m00 * (m11 * m22 - m12 * m21) - m01 * (m10 * m22 - m12 * m20)
-           + m02 * (m10 * m21 - m11 * m20))
-    inv = 1.0 / det
-    A[0, 0] = (m11 * m22 - m12 * m21) * inv
-    A[0, 1] = (m02 * m21 - m01 * m22) * inv
-    A[0, 2] = (m01 * m12 - m02 * m11) * inv
-    A[1, 0] = (m12 * m20 - m10 * m22) * inv
-    A[1, 1] = (m00 * m22 - m02 * m20) * inv
-    A[1, 2] = (m02 * m10 - m00 * m12) * inv
-    A[2, 0] = (m10 * m21 - m11 * m20) * inv
-    A[2, 1] = (m01 * m20 - m00 * m21) * inv
-    A[2, 2] = (m00 * m11 - m01 * m10) * inv
+    # M = I - W/2 (W antisymmetric: W01 = w01, W10 = -w01, ...) in B, A = M^-1
+    B[0, 0] = 1.0
+    B[0, 1] = -0.5 * w01
+    B[0, 2] = -0.5 * w02
+    B[1, 0] = 0.5 * w01
+    B[1, 1] = 1.0
+    B[1, 2] = -0.5 * w12
+    B[2, 0] = 0.5 * w02
+    B[2, 1] = 0.5 * w12
+    B[2, 2] = 1.0
+    inv3(B, A)
     # R = A (I + W/2) stored in B
     for i in range(3):
         a0 = A[i, 0]
