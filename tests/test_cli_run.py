@@ -189,3 +189,25 @@ def test_point_leaving_the_grid_stops_the_run_cleanly(tmp_path, capsys):
     assert "left the grid" in capsys.readouterr().err
     rows = _rows(out / "history.csv")
     assert len(rows) >= 2 and all(len(r.split(",")) == 6 for r in rows)
+
+
+def test_history_has_the_normalised_resistance(tmp_path):
+    """depth_over_R = depth / R and force_normalized = force / (S rho g R) in history.csv,
+    for the plate of test_cli_run's case (0.1 m square inside the grid: S = 0.01 m^2,
+    R = sqrt(S / pi); rho = 1000 kg/m^3)."""
+    import numpy as np
+
+    case = tmp_path / "case.toml"
+    case.write_text(textwrap.dedent(CASE).replace(
+        '"rigid_depth", "force"]', '"depth", "force", "depth_over_R", "force_normalized"]'))
+    assert main(["run", str(case), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    lines = [ln for ln in (tmp_path / "out" / "history.csv").read_text().splitlines()
+             if not ln.startswith("#")]
+    names = lines[0].split(",")
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    col = {n: rows[:, i] for i, n in enumerate(names)}
+    R = np.sqrt(0.01 / np.pi)
+    assert col["force"][-1] > 0
+    np.testing.assert_allclose(col["depth_over_R"], col["depth"] / R, rtol=1e-12)
+    np.testing.assert_allclose(col["force_normalized"],
+                               col["force"] / (0.01 * 1000.0 * 9.81 * R), rtol=1e-12)

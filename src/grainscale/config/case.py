@@ -254,6 +254,21 @@ class _Rigid(StrictModel):
     velocity: Vec3  # m/s, reached after ramp_time
     ramp_time: NonNeg = 0.0  # s
     start_time: float | None = None  # s; default time.start
+    # nodes: velocity imposed on covered nodes (no slip, never separating); penalty: a
+    # spring-dashpot on every point reaching into the exact shape (one-sided, frictional)
+    contact: Literal["nodes", "penalty"] = "nodes"
+    penalty: Annotated[float, Field(gt=0, le=4)] = 1.0  # kappa: x the point's own stiffness
+    damping_ratio: Annotated[float, Field(ge=0, le=1)] = 0.0  # zeta of the normal dashpot
+    friction: NonNeg = 0.0  # Coulomb coefficient of the body's surface (penalty)
+
+    @model_validator(mode="after")
+    def _contact_keys(self):
+        if self.contact == "nodes":
+            for key, default in (("penalty", 1.0), ("damping_ratio", 0.0), ("friction", 0.0)):
+                if getattr(self, key) != default:
+                    raise ValueError(f"{key} = {getattr(self, key)} applies to contact = "
+                                     "'penalty' only (contact = 'nodes' is no-slip)")
+        return self
 
 
 class RigidBoxCfg(_Rigid):
@@ -288,7 +303,8 @@ HISTORY_ALWAYS = ("time", "dt", "kinetic_energy", "axial_strain", "volumetric_st
                   "q", "q_over_p")
 HISTORY_DEM = ("porosity", "coordination", "mean_rotation")
 HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height")
-HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force")
+HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force",
+                 "depth_over_R", "force_normalized")
 
 
 class ProbeCfg(StrictModel):
@@ -382,6 +398,15 @@ def check_case(case: Case) -> None:
         valid += HISTORY_RIGID
     if any(m.type == "dem" for m in case.materials.values()):
         valid += HISTORY_DEM
+    normalised = {"depth_over_R", "force_normalized"} & set(case.output.history)
+    if case.rigid is not None and normalised:
+        v = case.rigid.velocity
+        if sum(c != 0.0 for c in v) != 1 or not any(case.solver.gravity):
+            raise ConfigError(f"output.history has {sorted(normalised)}, which refer to the "
+                              f"rigid body's cross-section normal to its motion and to "
+                              f"gravity: rigid.velocity = {list(v)} must lie along one grid "
+                              f"axis and solver.gravity = {list(case.solver.gravity)} must "
+                              "not be zero")
     for i, c in enumerate(case.output.history):
         if c not in valid:
             raise ConfigError(f"output.history[{i}] = {c!r}: not an available column; valid: "

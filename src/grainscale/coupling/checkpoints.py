@@ -150,7 +150,8 @@ def _commit(out: Path, s: MPMState, folder: Path, counters: dict, case: dict,
                                              dtype=np.uint8)}}
     if s.rigid is not None:
         groups["rigid"] = {"x": s.rigid.x, "displacement": s.rigid.displacement,
-                           "force": s.rigid.force}
+                           "force": s.rigid.force,
+                           "wave_speed_ref": np.array([s.rigid.wave_speed_ref])}
     attrs = {"time": s.time, "step": s.step, "vmax": s.vmax, "last_dt": s.last_dt,
              "ranks": s.comm.size, "parts": f"{PARTS}/{folder.name}", **counters}
     write_checkpoint(manifest, groups, attrs, fault="checkpoint.manifest")
@@ -283,6 +284,8 @@ def restore(found: Checkpoint, s: MPMState) -> dict:
         s.rigid.x[...] = rigid["x"]
         s.rigid.displacement[...] = rigid["displacement"]
         s.rigid.force[...] = rigid["force"]
+        # the penalty stiffness was fixed when the contact first acted (mpm/rigid.py)
+        s.rigid.wave_speed_ref = float(rigid["wave_speed_ref"][0])
     s.time = float(attrs["time"])
     s.step = int(attrs["step"])
     s.vmax = float(attrs["vmax"])

@@ -95,8 +95,16 @@ def history_values(case: Case, s: MPMState, pts: Points,
         v = s.rigid.velocity
         n = v / np.linalg.norm(v) if np.any(v) else np.zeros(3)
         depth = float(np.dot(s.rigid.displacement, n))
+        force = -float(np.dot(f, n))  # resistance to the motion
         out.update(rigid_fx=f[0], rigid_fy=f[1], rigid_fz=f[2], rigid_depth=depth,
-                   depth=depth, force=-float(np.dot(f, n)))  # resistance to the motion
+                   depth=depth, force=force)
+        # seed §4.3: d/R and p_u/(rho g R), p_u = force / S (the modelled section), rho
+        # the initial bulk density of the material
+        g = float(np.linalg.norm(case.solver.gravity))
+        rho = float(pts.m.sum() / pts.vol0.sum()) if pts.n else math.nan
+        R = s.rigid.radius
+        out.update(depth_over_R=depth / R,
+                   force_normalized=force / s.rigid.area / (rho * g * R) if g > 0 else math.nan)
     return out
 
 

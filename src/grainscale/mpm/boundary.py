@@ -216,9 +216,7 @@ def traction_loads(tractions: list[Traction], time: float, x: np.ndarray, lp: np
     None if no traction acts. The caller sums them in fixed point with the internal
     forces, so the nodal totals do not depend on the order of the points or on ranks.
     """
-    from grainscale.mpm.shape import LINEAR, evaluate
-
-    ids_all, f_all = [], []
+    pieces = []
     for t in tractions:
         k = t.factor(time)
         if k == 0.0:
@@ -229,15 +227,32 @@ def traction_loads(tractions: list[Traction], time: float, x: np.ndarray, lp: np
             Fp = F[t.points]
             force = force * area_ratio(Fp, t.normal)[:, None]
             offset = offset * np.linalg.norm(Fp @ t.normal, axis=1)  # stretched half-size
-        xs = np.ascontiguousarray(x[t.points] + offset[:, None] * t.normal[None, :])
-        base, w, _ = evaluate(xs, np.zeros(len(xs)), grid, LINEAR)
-        nx, ny = int(grid.nodes[0]), int(grid.nodes[1])
-        for i in range(2):
-            for j in range(2):
-                for kk in range(2):
-                    ids_all.append(base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk)))
-                    S = w[:, 0, i] * w[:, 1, j] * w[:, 2, kk]
-                    f_all.append((k * S)[:, None] * force)
-    if not ids_all:
-        return None
+        xs = x[t.points] + offset[:, None] * t.normal[None, :]
+        pieces.append(surface_loads(xs, force, grid, k))
+    return join_loads(pieces)
+
+
+def surface_loads(xs: np.ndarray, force: np.ndarray, grid: Grid, factor: float = 1.0):
+    """Forces factor * force (k,3) [N] acting at surface positions xs (k,3), spread to
+    the 8 nodes of each position's cell with linear weights: (node ids (8k,), forces
+    (8k,3))."""
+    from grainscale.mpm.shape import LINEAR, evaluate
+
+    base, w, _ = evaluate(np.ascontiguousarray(xs), np.zeros(len(xs)), grid, LINEAR)
+    nx, ny = int(grid.nodes[0]), int(grid.nodes[1])
+    ids_all, f_all = [], []
+    for i in range(2):
+        for j in range(2):
+            for kk in range(2):
+                ids_all.append(base[:, 0] + i + nx * (base[:, 1] + j + ny * (base[:, 2] + kk)))
+                S = w[:, 0, i] * w[:, 1, j] * w[:, 2, kk]
+                f_all.append((factor * S)[:, None] * force)
     return np.concatenate(ids_all), np.concatenate(f_all)
+
+
+def join_loads(pieces: list):
+    """One (node ids, forces) pair from several, or None if there are none."""
+    pieces = [pc for pc in pieces if pc is not None]
+    if not pieces:
+        return None
+    return np.concatenate([pc[0] for pc in pieces]), np.concatenate([pc[1] for pc in pieces])

@@ -26,7 +26,7 @@ from grainscale.mpm.points import (
     read_points,
     take,
 )
-from grainscale.mpm.rigid import RigidBody
+from grainscale.mpm.rigid import BOX, CYLINDER, RigidBody, cross_section
 from grainscale.mpm.step import MPMState
 
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -186,10 +186,24 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
                                    r.points_per_cell)
         if x.shape[0] == 0:
             raise ConfigError("rigid: the body contains no point inside the grid")
+        if r.shape == "box":
+            kind, geom = BOX, np.concatenate([r.lo, r.hi, [0.0, 0.0]])
+        else:
+            axis = np.zeros(3)
+            axis[AXES[r.axis]] = 1.0
+            kind, geom = CYLINDER, np.concatenate([r.center, axis, [r.radius, r.height]])
         rigid = RigidBody(x=x, lp=np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min()),
                           velocity=np.asarray(r.velocity, dtype=np.float64),
                           ramp_time=r.ramp_time,
-                          start_time=t0 if r.start_time is None else r.start_time)
+                          start_time=t0 if r.start_time is None else r.start_time,
+                          kind=kind, geom=np.asarray(geom, dtype=np.float64),
+                          contact=r.contact, penalty=r.penalty,
+                          damping_ratio=r.damping_ratio, friction=r.friction)
+        moving = np.flatnonzero(np.asarray(r.velocity) != 0.0)
+        if len(moving) == 1:  # along a grid axis: the section p_u and d/R refer to
+            glo, ghi = grid.period_box()
+            rigid.area, rigid.radius = cross_section(kind, rigid.geom, int(moving[0]),
+                                                     np.asarray(glo), np.asarray(ghi))
     s = case.solver
     state = MPMState(
         grid=grid, points=pts, materials=materials, mat_points=mat_points,

@@ -21,13 +21,19 @@ from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import Points
 from grainscale.mpm.rigid import RigidBody
 from grainscale.mpm.shape import evaluate, stencil_width
-from grainscale.mpm.transfer import Transfer, g2p_kernel, velocity_gradient_kernel
+from grainscale.mpm.transfer import (
+    Transfer,
+    fixed_point_scale,
+    g2p_kernel,
+    velocity_gradient_kernel,
+)
 
 SCHEMES = ("USF", "USL", "MUSL")
 VELOCITY_UPDATES = ("apic", "flip")
 _SOLVER = SolverCfg()  # the case file's defaults are the only ones
 _DAMPING = DampingCfg()
 MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry no velocity
+CONTACT_MASS_TOL = 1e-2  # lighter nodes of a penalty contact's zone get no force
 
 
 class SimulationError(RuntimeError):
@@ -77,13 +83,17 @@ class MPMState:
         self.dH = np.zeros((P, 3, 3))
         self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
                           np.zeros((P, 3, 3)))
-        self.fext = np.zeros((P, 3))  # N, point forces (none yet: tractions act on nodes)
+        self.fext = np.zeros((P, 3))  # N, point forces (none yet: loads act on nodes)
         vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
         mmax = float(self.points.m.max()) if P else 0.0
         self.vmax, mmax = self.comm.max([vmax, mmax])
         self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
         self.chunk_out = np.zeros_like(self.transfer.chunk_count)
         self.mass_tol = MASS_TOL * mmax
+        self.m_point_max = mmax
+        self.contact_loads = None
+        lp_min = float(self.points.lp.min()) if P else np.inf
+        self.lp_min = -float(self.comm.max([-lp_min])[0])  # smallest half-width, all ranks
 
     # ---------------------------------------------------------------- time step
     def wave_speed(self) -> float:
@@ -92,8 +102,12 @@ class MPMState:
         return float(self.comm.max([c])[0])
 
     def critical_dt(self) -> float:
-        """CFL limit dt = h_min / (c + |v|_max) (multiply by the CFL number to use it)."""
-        return float(self.grid.cell_size.min() / (self.wave_speed() + self.vmax))
+        """CFL limit dt = h_min / (c + |v|_max), or the period bound of a rigid body's
+        penalty contact if smaller (multiply by the CFL number to use it)."""
+        dt = float(self.grid.cell_size.min() / (self.wave_speed() + self.vmax))
+        if self.rigid is not None:
+            dt = min(dt, self.rigid.critical_dt(self.lp_min))
+        return dt
 
     def stable_dt(self) -> float:
         return self.cfl * self.critical_dt()
@@ -124,9 +138,14 @@ def p2g(s: MPMState) -> None:
     s.active = s.mass > s.mass_tol
 
 
+def nodes_contact(s: MPMState) -> bool:
+    """Is there a rigid body that imposes its velocity on nodes (`contact = "nodes"`)?"""
+    return s.rigid is not None and s.rigid.contact == "nodes"
+
+
 def rigid_velocity(s: MPMState, dt: float) -> None:
     """Nodes covered by the rigid body and the velocity it imposes during this step."""
-    if s.rigid is None:
+    if not nodes_contact(s):
         s.rigid_nodes = np.zeros(0, dtype=np.int64)
         return
     s.rigid_nodes = s.rigid.covered_nodes(s.grid)
@@ -142,7 +161,7 @@ def grid_velocity(s: MPMState) -> None:
     # the impulse of a wall or of the rigid body reaches the points too
     s.v_mapped = v.copy() if s.velocity_update == "flip" else v
     impose(s, v)
-    if s.rigid is not None:
+    if nodes_contact(s):
         # the material's velocity at the covered nodes before the body imposes its own:
         # the momentum the body takes away there is part of its reaction
         s.rigid_v_material = v[s.rigid_nodes].copy()
@@ -173,13 +192,42 @@ def update_stress(s: MPMState, vgrid: np.ndarray, dt: float) -> None:
         raise RemoteFailure(f"step {s.step}: another rank failed")
 
 
+def rigid_penalty(s: MPMState, dt: float) -> None:
+    """Penalty contact of the rigid body on the points (mpm/rigid.py) as nodal loads, and
+    its reaction: minus their sum over all ranks, in fixed point so that it does not
+    depend on how the points are split."""
+    body = s.rigid
+    s.contact_loads = None
+    if body is None or body.contact != "penalty":
+        return
+    if body.wave_speed_ref <= 0.0:  # the stiffness is fixed when the contact first acts
+        body.wave_speed_ref = s.wave_speed()
+    pts = s.points
+    _, force, where = body.penalty_forces(pts.x, pts.v, pts.m, pts.lp, s.time, dt)
+    bound = float(s.comm.max([float(np.abs(force).sum())])[0])
+    if not np.isfinite(bound):
+        raise SimulationError(f"step {s.step}: non-finite contact force of the rigid body")
+    total = np.zeros(3, dtype=np.int64)
+    scale = fixed_point_scale(bound * s.comm.size)
+    total[:] = np.rint(force * scale).astype(np.int64).sum(axis=0)
+    s.comm.sum_int(total)
+    body.force = -total / scale
+    if len(force):
+        s.contact_loads = boundary.surface_loads(where, force, s.grid)
+
+
 def nodal_forces(s: MPMState) -> None:
-    """f_I = f_int + f_ext (seed Eq. 5-6): stress divergence, gravity, point tractions."""
+    """f_I = f_int + f_ext (seed Eq. 5-6): stress divergence, gravity, point tractions
+    and a rigid body's penalty contact."""
     pts = s.points
     loads = boundary.traction_loads(s.tractions, s.time, pts.x, pts.lp, s.grid, pts.F)
+    n_extra = s.n_traction_global
+    if s.rigid is not None and s.rigid.contact == "penalty":
+        loads = boundary.join_loads([loads, s.contact_loads])
+        n_extra += s.n_global  # at most one contact load per point and node
     s.force, ok = s.transfer.force(pts.m, pts.vol, pts.stress, s.fext, s.gravity,
                                    s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns,
-                                   extra=loads, n_extra=s.n_traction_global)
+                                   extra=loads, n_extra=n_extra)
     if not ok:
         raise SimulationError(f"step {s.step}: non-finite stress or load at a material point")
 
@@ -188,7 +236,15 @@ def integrate_grid(s: MPMState, dt: float) -> None:
     """p_I <- m_I v_I + dt f_I (seed Eq. 3), with damping, Dirichlet conditions and the
     rigid body; the rigid body's reaction is recorded."""
     f = s.force
-    if s.rigid is not None:
+    if s.contact_loads is not None:
+        # nodes of the contact zone holding a sliver of a point's mass get no force: their
+        # internal force grows like the overlap, their mass like its square (a loaded
+        # surface crossing a node plane), and the acceleration would blow up
+        light = np.zeros(len(s.mass), dtype=np.bool_)
+        light[s.contact_loads[0]] = True
+        light &= s.mass < CONTACT_MASS_TOL * s.m_point_max
+        f[light] = 0.0
+    if nodes_contact(s):
         # the force the body exerts on the nodes it covers is (m_I v_body - p_I)/dt - f_I,
         # p_I the material's momentum there (mapped, after the Dirichlet conditions);
         # the material pushes back with minus its sum (damping does not enter: it is a
@@ -201,12 +257,12 @@ def integrate_grid(s: MPMState, dt: float) -> None:
         boundary.local_damping(f, s.v_old, s.damping)
     p = s.mass[:, None] * s.v_old + dt * f
     impose(s, p, s.mass)
-    if s.rigid is not None:
+    if nodes_contact(s):
         p[rn] = target
     v = np.zeros_like(p)
     a = s.active
     v[a] = p[a] / s.mass[a, None]
-    if s.rigid is not None:
+    if nodes_contact(s):
         v[s.rigid_nodes] = s.rigid_v  # also on covered nodes without material
     s.v_new = v
 
@@ -252,7 +308,7 @@ def remap_velocity(s: MPMState) -> None:
     a = s.active
     v[a] = mom[a] / s.mass[a, None]
     impose(s, v)
-    if s.rigid is not None:
+    if nodes_contact(s):
         v[s.rigid_nodes] = s.rigid_v
     s.v_new = v
 
@@ -272,6 +328,7 @@ def step(s: MPMState, dt: float) -> None:
     grid_velocity(s)
     if s.scheme == "USF":
         update_stress(s, s.v_old, dt)
+    rigid_penalty(s, dt)
     nodal_forces(s)
     integrate_grid(s, dt)
     g2p(s, dt)
