@@ -285,7 +285,8 @@ def restore(found: Checkpoint, s: MPMState) -> dict:
         s.rigid.displacement[...] = rigid["displacement"]
         s.rigid.force[...] = rigid["force"]
         # the penalty stiffness was fixed when the contact first acted (mpm/rigid.py)
-        s.rigid.wave_speed_ref = float(rigid["wave_speed_ref"][0])
+        if "wave_speed_ref" in rigid:  # absent from checkpoints of node-contact runs
+            s.rigid.wave_speed_ref = float(rigid["wave_speed_ref"][0])
     s.time = float(attrs["time"])
     s.step = int(attrs["step"])
     s.vmax = float(attrs["vmax"])
