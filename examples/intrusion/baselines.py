@@ -1,0 +1,105 @@
+"""Continuum baselines of a multiscale intrusion case: Mohr-Coulomb and mu(I) beds in the
+very same geometry.
+
+    python examples/intrusion/baselines.py --phi-from phi.json --out DIR
+        [--cases quick.toml quick_cuboid.toml] [--materials mohr_coulomb mu_i]
+
+For each case (beside this script unless a path is given) and material, the case with
+its DEM material replaced by a continuum of friction angle phi (the RVE's, measured by
+friction_angle.py), the bed's density and a stiffness of the RVE's order, run into
+DIR/<material>_<case stem>; the probes, the [rve] and [triaxial] tables and the DEM
+history columns are dropped. Then `analyse.py` compares them, e.g.
+    python examples/intrusion/analyse.py DIR/mohr_coulomb_quick DIR/mohr_coulomb_quick_cuboid
+        --phi-from phi.json
+A run already complete in DIR is not repeated. The last printed line is one JSON object
+with the runs' folders and wall times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+import tomllib
+from pathlib import Path
+
+import tomli_w
+
+HERE = Path(__file__).resolve().parent
+DENSITY = 1600.0  # kg/m3: grains of 2650 kg/m3 at porosity 0.397 (seed §4.3)
+YOUNG = 10e6  # Pa: the order of the RVE's tangent stiffness at ~10 kPa
+NU = 0.3
+
+
+def continuum(material: str, phi: float) -> dict:
+    if material == "mohr_coulomb":
+        return {"type": "mohr_coulomb", "density": DENSITY, "youngs_modulus": YOUNG,
+                "poisson_ratio": NU, "friction_angle": phi, "dilation_angle": 0.0,
+                "cohesion": 0.0, "tension_cutoff": 0.0}
+    # mu(I) with mu_s = tan phi; quasi-static intrusion keeps I << I_0, so mu ~ mu_s
+    mu_s = math.tan(math.radians(phi))
+    return {"type": "mu_i", "density": DENSITY, "youngs_modulus": YOUNG, "poisson_ratio": NU,
+            "mu_s": mu_s, "mu_2": mu_s + 0.26, "I_0": 0.279, "grain_diameter": 0.01,
+            "grain_density": 2650.0}
+
+
+def baseline_case(path: Path, material: str, phi: float) -> dict:
+    case = tomllib.loads(path.read_text())
+    for key in ("rve", "triaxial"):
+        case.pop(key, None)
+    case["materials"] = {"sand": continuum(material, phi)}
+    case["title"] = f"{case['title']}: {material} baseline, phi = {phi:g} deg"
+    out = case["output"]
+    out.pop("probes", None)
+    out["checkpoint_every"] = 0
+    out["history"] = [c for c in out["history"]
+                      if c not in ("porosity", "coordination", "mean_rotation")]
+    return case
+
+
+def run(case: dict, out: Path) -> float:
+    from grainscale.cli import main as grainscale
+
+    out.mkdir(parents=True, exist_ok=True)
+    done = out / "wall.json"
+    if done.is_file():
+        return float(json.loads(done.read_text())["wall_s"])
+    (out / "case.toml").write_text(tomli_w.dumps(case))
+    t0 = time.perf_counter()
+    code = grainscale(["run", str(out / "case.toml"), "--out", str(out / "run"), "--quiet"])
+    if code:
+        raise SystemExit(f"{out}: grainscale run exited with {code}")
+    wall = time.perf_counter() - t0
+    done.write_text(json.dumps({"wall_s": wall}))
+    return wall
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--cases", nargs="+", default=["quick.toml", "quick_cuboid.toml"])
+    ap.add_argument("--materials", nargs="+", default=["mohr_coulomb", "mu_i"],
+                    choices=["mohr_coulomb", "mu_i"])
+    g = ap.add_mutually_exclusive_group(required=True)
+    g.add_argument("--phi", type=float, help="friction angle [deg]")
+    g.add_argument("--phi-from", type=Path, help="JSON with phi_deg (friction_angle.py)")
+    args = ap.parse_args()
+    phi = args.phi if args.phi is not None else json.loads(args.phi_from.read_text())["phi_deg"]
+    if not 0.0 < phi < 60.0:
+        raise SystemExit(f"phi = {phi} deg: valid 0 < phi < 60")
+    runs = {}
+    for name in args.cases:
+        path = Path(name) if Path(name).is_file() else HERE / name
+        if not path.is_file():
+            raise SystemExit(f"--cases {name}: no such file (here or in {HERE})")
+        for material in args.materials:
+            out = args.out / f"{material}_{path.stem}"
+            wall = run(baseline_case(path, material, phi), out)
+            print(f"{material} {path.name}: {out / 'run'} ({wall:.0f} s)", flush=True)
+            runs[f"{material}_{path.stem}"] = {"run": str(out / "run"), "wall_s": round(wall)}
+    print(json.dumps({"phi_deg": phi, "runs": runs}))
+
+
+if __name__ == "__main__":
+    main()
