@@ -30,6 +30,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import tomli_w  # noqa: E402
 
+from grainscale.io.history import read_history  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 ASPECT = 0.6
 X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
@@ -57,11 +59,6 @@ def case_at(h: float, material: str, friction_angle: float) -> dict:
     return case
 
 
-def read_history(path: Path) -> dict[str, np.ndarray]:
-    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
-    names = lines[0].split(",")
-    data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
-    return {n: data[:, i] for i, n in enumerate(names)}
 
 
 def measures(h: dict[str, np.ndarray]) -> dict[str, float]:

@@ -36,7 +36,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from convergence import experiment_bands, measures, read_history, run_one  # noqa: E402
+from convergence import experiment_bands, measures, run_one  # noqa: E402
+
+from grainscale.io.history import read_history  # noqa: E402
 
 
 def measure_flow(case: Path, out: Path, tiles: int, pressures: list[float],

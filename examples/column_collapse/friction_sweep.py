@@ -16,7 +16,9 @@ import argparse
 import json
 from pathlib import Path
 
-from convergence import case_at, measures, read_history, run_one
+from convergence import case_at, measures, run_one
+
+from grainscale.io.history import read_history
 
 
 def main() -> None:

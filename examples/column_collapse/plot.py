@@ -15,14 +15,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
-
-def read_history(path: Path) -> dict[str, np.ndarray]:
-    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
-    names = lines[0].split(",")
-    data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
-    return {n: data[:, i] for i, n in enumerate(names)}
+from grainscale.io.history import read_history  # noqa: E402
 
 
 def plot(out_dir: Path, png: Path, aspect: float = 0.6) -> Path:

@@ -65,6 +65,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from grainscale.io import history  # noqa: E402
 from grainscale.theory.archimedes import k_phi, phi_for_k  # noqa: E402
 
 REQUIRED = ("depth_over_R", "force_normalized")
@@ -77,28 +78,11 @@ class InputError(Exception):
 
 
 def read_history(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a grainscale history.csv ('#' comment lines, then a header row). A last
-    row cut short (a run killed while writing) is dropped; any other bad row is an
-    error."""
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-    if not lines:
-        raise InputError(f"{path}: no header row")
-    names = [c.strip() for c in lines[0].split(",")]
-    rows = []
-    for k, ln in enumerate(lines[1:]):
-        fields = ln.split(",")
-        try:
-            if len(fields) != len(names):
-                raise ValueError(f"{len(fields)} fields, header has {len(names)}")
-            rows.append([float(v) for v in fields])
-        except ValueError as err:
-            if k == len(lines) - 2:
-                break  # the last row, cut short
-            raise InputError(f"{path}: data row {k + 1}: {err}") from None
-    data = np.array(rows, dtype=float).reshape(len(rows), len(names))
-    return {n: data[:, i] for i, n in enumerate(names)}
+    """grainscale.io.history.read_history, its errors as InputError."""
+    try:
+        return history.read_history(path)
+    except ValueError as err:
+        raise InputError(str(err)) from None
 
 
 def load_run(out: Path) -> dict:

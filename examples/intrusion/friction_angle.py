@@ -24,14 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
+from grainscale.io.history import read_history
+
 T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306}
 
 
-def read_csv(path: Path) -> dict[str, np.ndarray]:
-    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
-    names = lines[0].split(",")
-    data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
-    return {n: data[:, i] for i, n in enumerate(names)}
 
 
 def mobilised_angle(h: dict[str, np.ndarray]) -> np.ndarray:
@@ -59,7 +56,7 @@ def main() -> None:
             subprocess.run([sys.executable, "-m", "grainscale", "rve", "triaxial",
                             str(args.case), "--packing", str(pack), "--out", str(csv),
                             "--quiet"], check=True)
-        h = read_csv(csv)
+        h = read_history(csv)
         phi = mobilised_angle(h)
         window = h["axial_strain"] >= args.start
         if window.sum() < 5:

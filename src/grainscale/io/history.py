@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from grainscale.io import faults
 
 UNITS = {
@@ -76,3 +78,29 @@ class History:
 
     def close(self) -> None:
         self._f.close()
+
+
+def read_history(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a history.csv as History writes it ('#' comment lines, then a header
+    row), or of any such CSV. A last row cut short (a run killed while writing) is
+    dropped; any other bad row raises ValueError naming the file and the row."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    if not lines:
+        raise ValueError(f"{path}: no header row")
+    names = [c.strip() for c in lines[0].split(",")]
+    rows = []
+    for k, ln in enumerate(lines[1:]):
+        fields = ln.split(",")
+        try:
+            if len(fields) != len(names):
+                raise ValueError(f"{len(fields)} fields, header has {len(names)}")
+            rows.append([float(v) for v in fields])
+        except ValueError as err:
+            if k == len(lines) - 2:
+                break  # the last row, cut short
+            raise ValueError(f"{path}: data row {k + 1}: {err}") from None
+    data = np.array(rows, dtype=float).reshape(len(rows), len(names))
+    return {n: data[:, i] for i, n in enumerate(names)}
