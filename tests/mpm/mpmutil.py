@@ -64,3 +64,18 @@ def run(s: MPMState, t_end: float, record=None):
         if record is not None:
             record(s)
     return s
+
+
+def impulse_errors(s: MPMState, t_end: float, weight: float) -> list[float]:
+    """Step to t_end; per step, the material's vertical momentum change less the impulse
+    of gravity and the rigid body, -dt (m g + F_z), over dt m g."""
+    from grainscale.mpm.step import step
+
+    errors = []
+    while s.time < t_end - 1e-12:
+        dt = min(s.stable_dt(), t_end - s.time)
+        before = s.points.m @ s.points.v
+        step(s, dt)
+        change = s.points.m @ s.points.v - before
+        errors.append((change[2] + dt * (weight + s.rigid.force[2])) / (dt * weight))
+    return errors
