@@ -12,7 +12,9 @@ run beside Lube et al. 2005, 1.2 a, and Lajeunesse et al. 2005, 1.8 a; final run
 against cell size) and prints a table; the last line is one JSON object.
 
 Front-stop time: the first t / tau_c at which the front is within 0.01 L_i of its final
-position.
+position. The final deposit (last frame): its thickness along the channel, and the
+runout of the part at least 2 and 3 bead diameters thick (the experiment's 1.15 mm beads;
+`front` itself is the outermost point, however thin the layer it ends in).
 """
 
 from __future__ import annotations
@@ -30,10 +32,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import tomli_w  # noqa: E402
 
+from grainscale.coupling.outputs import deposit_profile, front_at_thickness  # noqa: E402
 from grainscale.io.history import read_history  # noqa: E402
+from grainscale.io.vtk import PVDSeries, read_points_vtu  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ASPECT = 0.6
+LENGTH = 0.1  # m, L_i
+BEAD = 1.15e-3  # m, the diameter of Lajeunesse et al.'s glass beads
 X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 
 
@@ -72,6 +78,21 @@ def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
             "kinetic_energy_end_over_peak": float(ke[-1] / ke.max()) if ke.max() > 0 else 0.0}
 
 
+def deposit(run: Path, case: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Thickness of the last frame's deposit along x (bins one point spacing wide, point
+    domains of half-width cell / (2 n)): bin edges and thicknesses [m]."""
+    frames = PVDSeries.load(run / "frames.pvd").entries
+    x, _ = read_points_vtu(run / frames[-1][1])
+    spacing = case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+    return deposit_profile(x[:, 0], x[:, 2], spacing / 2, spacing)
+
+
+def thick_runouts(edges: np.ndarray, thick: np.ndarray) -> dict[str, float]:
+    """Runout ratio of the deposit where it is at least 2 and 3 bead diameters thick."""
+    return {f"runout_{k}d": (front_at_thickness(edges, thick, k * BEAD) - LENGTH) / LENGTH
+            for k in (2, 3)}
+
+
 def run_one(case: dict, out: Path) -> float:
     """Run the case into out/run unless it is complete there; wall seconds spent."""
     from grainscale.cli import main as grainscale
@@ -101,8 +122,8 @@ def experiment_bands(ax) -> None:
                    label=f"{who}: {frac}a = {frac * ASPECT:.2f}")
 
 
-def plot(results: list[dict], histories: dict, png: Path) -> None:
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2))
+def plot(results: list[dict], histories: dict, deposits: dict, png: Path) -> None:
+    fig, (ax, bx, cx) = plt.subplots(1, 3, figsize=(16, 4.2))
     styles = {"mu_i": "-", "mohr_coulomb": "--"}
     sizes = sorted({r["cell_mm"] for r in results}, reverse=True)
     colours = dict(zip(sizes, plt.cm.viridis(np.linspace(0.0, 0.85, len(sizes))), strict=True))
@@ -111,6 +132,9 @@ def plot(results: list[dict], histories: dict, png: Path) -> None:
         after = h["t_over_tc"] >= 0
         ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], styles[r["material"]],
                 color=colours[r["cell_mm"]], label=f"{r['label']}, {r['cell_mm']:g} mm")
+        edges, thick = deposits[(r["material"], r["cell_mm"])]
+        cx.step(edges / LENGTH, thick * 1e3, styles[r["material"]], where="post",
+                color=colours[r["cell_mm"]], lw=1, label=f"{r['label']}, {r['cell_mm']:g} mm")
     for b in (ax, bx):
         experiment_bands(b)
     ax.set_xlabel("t / tau_c")
@@ -129,6 +153,13 @@ def plot(results: list[dict], histories: dict, png: Path) -> None:
     bx.set_ylabel("final runout at 7 tau_c")
     bx.set_ylim(bottom=0)
     bx.legend(fontsize=7)
+    for k in (2, 3):
+        cx.axhline(k * BEAD * 1e3, color="0.6", lw=0.8, ls=":")
+    cx.set_xlim(1.0, None)
+    cx.set_ylim(0, 20)
+    cx.set_xlabel("x / L_i (the column's face was at 1)")
+    cx.set_ylabel("final deposit thickness (mm); dotted: 2 and 3 beads")
+    cx.legend(fontsize=7)
     fig.suptitle(f"column collapse a = {ASPECT}: grid convergence")
     fig.tight_layout()
     fig.savefig(png, dpi=120)
@@ -145,27 +176,31 @@ def main() -> None:
     ap.add_argument("--friction-angle", type=float, default=22.0,
                     help="Mohr-Coulomb friction angle (deg)")
     args = ap.parse_args()
-    results, histories = [], {}
+    results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
         for mm in sorted(args.cells, reverse=True):
             out = args.out / f"{mat}_{mm:g}mm"
-            wall = run_one(case_at(mm * 1e-3, mat, args.friction_angle), out)
+            case = case_at(mm * 1e-3, mat, args.friction_angle)
+            wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h
+            deposits[(mat, mm)] = deposit(out / "run", case)
             row = {"material": mat, "label": label, "cell_mm": mm, "wall_s": round(wall, 1),
-                   **measures(h)}
+                   **measures(h), **thick_runouts(*deposits[(mat, mm)])}
             results.append(row)
-            print(f"{label:24s} {mm:5g} mm: runout {row['runout']:.3f}, H_f/H_i "
-                  f"{row['height_ratio']:.3f}, front stops at {row['front_stop_t_over_tc']:.2f} "
-                  f"tau_c, KE end/peak {row['kinetic_energy_end_over_peak']:.3f}, "
-                  f"{wall:.0f} s", flush=True)
+            print(f"{label:24s} {mm:5g} mm: runout {row['runout']:.3f} (deposit >= 2 / 3 "
+                  f"beads thick: {row['runout_2d']:.3f} / {row['runout_3d']:.3f}), H_f/H_i "
+                  f"{row['height_ratio']:.3f}, front stops at "
+                  f"{row['front_stop_t_over_tc']:.2f} tau_c, KE end/peak "
+                  f"{row['kinetic_energy_end_over_peak']:.3f}, {wall:.0f} s", flush=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=1))
-    plot(results, histories, args.out / "convergence.png")
+    plot(results, histories, deposits, args.out / "convergence.png")
     summary = {}
     for mat in args.materials:
         rows = sorted((r for r in results if r["material"] == mat), key=lambda r: r["cell_mm"])
-        summary[f"{mat}_runout"] = {f"{r['cell_mm']:g}mm": round(r["runout"], 4) for r in rows}
+        for key in ("runout", "runout_2d", "runout_3d"):
+            summary[f"{mat}_{key}"] = {f"{r['cell_mm']:g}mm": round(r[key], 4) for r in rows}
         if len(rows) >= 2:
             summary[f"{mat}_finest_change"] = round(abs(rows[0]["runout"] / rows[1]["runout"]
                                                         - 1.0), 4)

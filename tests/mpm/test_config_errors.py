@@ -66,6 +66,9 @@ def test_good_case_builds(tmp_path):
     ("end = 0.01", "end = -1.0", ["time.end", "-1.0"]),
     ('interval = 0.005', 'interval = 0.005\nhistory = ["time", "runout_ratio"]',
      ["output.history[1]", "runout_ratio", "[output.column]"]),
+    ('interval = 0.005', 'interval = 0.005\nhistory = ["runout_ratio_thick"]\n'
+     '[output.column]\nlength = 0.05\nheight = 0.1',
+     ["runout_ratio_thick", "output.column.min_thickness", "> 0"]),
     ("[grid]", "[grid]\nsize = 3", ["grid.size", "unknown key"]),
 ])
 def test_bad_input_is_named(tmp_path, old, new, words):

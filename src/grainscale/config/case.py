@@ -297,12 +297,16 @@ class ColumnCfg(StrictModel):
     flow_axis: Axis = "x"
     up_axis: Axis = "z"
     front_quantile: Annotated[float, Field(gt=0, le=1)] = 1.0  # 1: outermost point edge
+    # m; > 0 adds front_thick and runout_ratio_thick: the far end of the deposit where it
+    # is at least this thick (a front that ignores a thinner tail)
+    min_thickness: NonNeg = 0.0
 
 
 HISTORY_ALWAYS = ("time", "dt", "kinetic_energy", "axial_strain", "volumetric_strain", "p",
                   "q", "q_over_p")
 HISTORY_DEM = ("porosity", "coordination", "mean_rotation")
-HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height")
+HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height",
+                  "front_thick", "runout_ratio_thick")
 HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force",
                  "depth_over_R", "force_normalized")
 
@@ -412,6 +416,11 @@ def check_case(case: Case) -> None:
             raise ConfigError(f"output.history[{i}] = {c!r}: not an available column; valid: "
                               f"{valid} (runout columns need [output.column], rigid_* need "
                               "[rigid], porosity/coordination/mean_rotation a 'dem' material)")
+    thick = {"front_thick", "runout_ratio_thick"} & set(case.output.history)
+    if thick and case.output.column.min_thickness <= 0.0:
+        raise ConfigError(f"output.history has {sorted(thick)}, which need "
+                          "output.column.min_thickness > 0 (m, the thickness the deposit "
+                          f"must have at the front); it is {case.output.column.min_thickness}")
     if "t_over_tc" in case.output.history and not any(case.solver.gravity):
         raise ConfigError("output.history contains 't_over_tc' but solver.gravity = "
                           f"{list(case.solver.gravity)}: tau_c = sqrt(H/g) needs gravity")

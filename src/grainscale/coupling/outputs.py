@@ -90,6 +90,13 @@ def history_values(case: Case, s: MPMState, pts: Points,
                    runout_ratio=(front - col.wall - col.length) / col.length,
                    height_ratio=height / col.height,
                    t_over_tc=s.time / math.sqrt(col.height / g) if g > 0 else math.nan)
+        if col.min_thickness > 0.0:
+            # bins one point spacing (2 l_p) wide
+            edges, thick = deposit_profile(pts.x[:, fa], pts.x[:, ua], pts.lp,
+                                           2.0 * float(np.median(pts.lp)), col.base)
+            front = front_at_thickness(edges, thick, col.min_thickness)
+            out.update(front_thick=front,
+                       runout_ratio_thick=(front - col.wall - col.length) / col.length)
     if s.rigid is not None:
         f = s.rigid.force
         v = s.rigid.velocity
@@ -106,6 +113,30 @@ def history_values(case: Case, s: MPMState, pts: Points,
         out.update(depth_over_R=depth / R,
                    force_normalized=force / s.rigid.area / (rho * g * R) if g > 0 else math.nan)
     return out
+
+
+def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
+                    spacing: float, base: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Thickness of a layer of points along one axis: bins of width `spacing` [m] from the
+    first point domain's rear edge; in each, the highest point-domain edge above `base`
+    (max of up + lp - base, 0 where a bin holds no point centre). Returns the bins' lower
+    edges and the thicknesses [m]."""
+    lp = np.broadcast_to(np.asarray(lp, dtype=float), along.shape)
+    start = float((along - lp).min())
+    idx = np.floor((along - start) / spacing).astype(np.int64)
+    thick = np.zeros(int(idx.max()) + 1)
+    np.maximum.at(thick, idx, up + lp - base)
+    return start + spacing * np.arange(len(thick)), thick
+
+
+def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float) -> float:
+    """The far end [m] of the last bin of a deposit_profile at least `minimum` [m] thick
+    (a front that ignores a tail thinner than `minimum`); NaN if none is."""
+    thick = np.flatnonzero(thickness >= minimum)
+    if not thick.size:
+        return math.nan
+    spacing = edges[1] - edges[0] if len(edges) > 1 else 0.0
+    return float(edges[thick[-1]] + spacing)
 
 
 def point_fields(pts: Points, fields: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

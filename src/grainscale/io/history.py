@@ -15,6 +15,7 @@ from grainscale.io import faults
 UNITS = {
     "step": "-", "time": "s", "dt": "s", "kinetic_energy": "J", "t_over_tc": "-",
     "runout_ratio": "-", "height_ratio": "-", "front": "m", "column_height": "m",
+    "front_thick": "m", "runout_ratio_thick": "-",
     "rigid_fx": "N", "rigid_fy": "N", "rigid_fz": "N", "rigid_depth": "m", "depth": "m",
     "force": "N", "depth_over_R": "-", "force_normalized": "-",
     "p": "Pa", "q": "Pa", "q_over_p": "-", "axial_strain": "-", "volumetric_strain": "-",
@@ -28,7 +29,8 @@ CONVENTION = ("SI units. Stresses: tension positive internally; p = -tr(sigma)/3
               "depth_over_R = d/R, force_normalized = p_u/(rho g R), p_u = force/S, S "
               "and R the body's section inside the grid and its (equivalent) radius, rho "
               "the material's initial bulk density. "
-              "runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i. p, q: of the "
+              "runout_ratio = (L - L_i)/L_i, height_ratio = H/H_i; *_thick: L where the "
+              "deposit is at least min_thickness thick. p, q: of the "
               "volume-averaged stress; axial_strain = 1 - mean F_aa (compression "
               "positive); volumetric_strain = ln(V/V0) (positive = dilation).")
 

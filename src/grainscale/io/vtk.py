@@ -47,6 +47,13 @@ def write_points_vtu(path: str | Path, points: np.ndarray,
     faults.point("vtu.renamed")
 
 
+def read_points_vtu(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Points (P,3) and per-point fields of a .vtu written by write_points_vtu (tensor
+    fields come back flattened, (P,9))."""
+    mesh = meshio.read(path)
+    return mesh.points, dict(mesh.point_data)
+
+
 class PVDSeries:
     """A .pvd collection file listing (time, file) entries, rewritten atomically on add."""
 

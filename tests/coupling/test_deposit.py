@@ -1,0 +1,110 @@
+"""The deposit profile of a column collapse (coupling.outputs.deposit_profile and
+front_at_thickness) against a lattice of points filling a known wedge."""
+
+import numpy as np
+import pytest
+
+from grainscale.coupling.outputs import deposit_profile, front_at_thickness
+from grainscale.io.vtk import read_points_vtu, write_points_vtu
+
+
+def _wedge(H=0.06, slope=0.3, d=1e-3):
+    """Point centres of a square lattice (spacing d, point domains of half-width d/2)
+    under the surface z = H - slope x, x >= 0."""
+    xs = (np.arange(int(H / slope / d) + 2) + 0.5) * d
+    zs = (np.arange(int(H / d) + 1) + 0.5) * d
+    x, z = np.meshgrid(xs, zs, indexing="ij")
+    inside = z + d / 2 <= H - slope * x
+    return x[inside], z[inside]
+
+
+def test_profile_of_a_wedge_follows_its_surface():
+    """Each bin's thickness is the top of the last whole point layer under the surface:
+    within one spacing d below H - slope x at the bin's far end (the staircase), never
+    above the surface at its near end."""
+    H, slope, d = 0.06, 0.3, 1e-3
+    x, z = _wedge(H, slope, d)
+    edges, thick = deposit_profile(x, z, d / 2, d)
+    assert edges[0] == pytest.approx(0.0, abs=1e-15)
+    assert np.all(thick <= H - slope * edges + 1e-12)
+    assert np.all(thick >= H - slope * (edges + d) - d - 1e-12)
+
+
+@pytest.mark.parametrize("minimum", [1e-3, 5e-3, 20e-3])
+def test_front_at_a_thickness(minimum):
+    """The wedge is `minimum` thick at x = (H - minimum)/slope; the staircase of point
+    layers (steps d high, d/slope long) puts the measured front within d/slope + d."""
+    H, slope, d = 0.06, 0.3, 1e-3
+    x, z = _wedge(H, slope, d)
+    edges, thick = deposit_profile(x, z, d / 2, d)
+    front = front_at_thickness(edges, thick, minimum)
+    assert front == pytest.approx((H - minimum) / slope, abs=d / slope + d)
+
+
+def test_any_thickness_gives_the_outermost_edge_and_none_gives_nan():
+    """A minimum below every point's height reproduces the history's `front` (outermost
+    point-domain edge); one above the deposit has no front."""
+    x, z = _wedge()
+    edges, thick = deposit_profile(x, z, 0.5e-3, 1e-3)
+    assert front_at_thickness(edges, thick, 1e-9) == pytest.approx(x.max() + 0.5e-3,
+                                                                   rel=1e-12)
+    assert np.isnan(front_at_thickness(edges, thick, 1.0))
+
+
+def test_frames_read_back(tmp_path):
+    """read_points_vtu returns what write_points_vtu wrote (tensors flattened)."""
+    rng = np.random.default_rng(0)
+    pts = rng.random((5, 3))
+    stress = rng.random((5, 3, 3))
+    write_points_vtu(tmp_path / "f.vtu", pts, {"stress": stress, "p": pts[:, 0]})
+    back, data = read_points_vtu(tmp_path / "f.vtu")
+    np.testing.assert_array_equal(back, pts)
+    np.testing.assert_array_equal(data["stress"].reshape(5, 3, 3), stress)
+    np.testing.assert_array_equal(data["p"], pts[:, 0])
+
+
+def test_history_reports_the_thick_front(tmp_path):
+    """A column at rest: runout_ratio_thick is 0 (the deposit is H_i thick up to its
+    face); pushed out by a thin layer (one point row moved beyond the face), `front`
+    follows the layer and `front_thick` (min_thickness above one row) does not."""
+    from grainscale.config.case import load_case
+    from grainscale.coupling.outputs import history_values
+    from grainscale.mpm.setup import build_state
+
+    case_file = tmp_path / "case.toml"
+    case_file.write_text("""
+[grid]
+cell_size = 0.01
+cells = [20, 2, 8]
+[solver]
+gravity = [0.0, 0.0, -9.81]
+[time]
+end = 0.01
+[materials.soil]
+type = "linear_elastic"
+density = 1000.0
+youngs_modulus = 1e6
+poisson_ratio = 0.3
+[[bodies]]
+shape = "box"
+material = "soil"
+lo = [0.0, 0.0, 0.0]
+hi = [0.05, 0.01, 0.06]
+[output]
+interval = 0.005
+history = ["runout_ratio", "runout_ratio_thick", "front_thick"]
+[output.column]
+length = 0.05
+height = 0.06
+min_thickness = 0.006
+""")
+    case = load_case(case_file)
+    s = build_state(case, tmp_path)
+    row = history_values(case, s, s.points, {})
+    assert row["runout_ratio"] == pytest.approx(0.0, abs=1e-12)
+    assert row["runout_ratio_thick"] == pytest.approx(0.0, abs=1e-12)
+    bottom = s.points.x[:, 2] < s.points.x[:, 2].min() + 1e-9  # one row, 2 l_p = 5 mm thick
+    s.points.x[bottom, 0] += 0.05
+    row = history_values(case, s, s.points, {})
+    assert row["runout_ratio"] == pytest.approx(1.0, abs=1e-12)
+    assert row["front_thick"] == pytest.approx(0.05, abs=1e-12)
