@@ -2,10 +2,13 @@
 shear (one thread), Verlet-skin variants as ratios, and the parallel efficiency of a batch
 of RVEs on all cores.
 
-    python benchmarks/dem_throughput.py [--steps 20000] [--batch 8] [--quick]
+    python benchmarks/dem_throughput.py [--steps 20000] [--batch 8] [--big-batch 64] [--quick]
 
 Prints a table; the last line is one JSON object with at least `ns_per_particle_step`
-(single thread, shear) and `parallel_efficiency`.
+(single thread, shear), `parallel_efficiency` and `ns_per_particle_step_batch`: core-ns
+per particle-step of a batch of `--big-batch` RVEs (default 64) of 800 spheres in shear
+on one thread, with the batch's parallel efficiency on all threads
+(`parallel_efficiency_batch`).
 """
 
 from __future__ import annotations
@@ -48,6 +51,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--batch", type=int, default=8, help="RVEs in the parallel batch")
+    ap.add_argument("--big-batch", type=int, default=64,
+                    help="RVEs in the batch of ns_per_particle_step_batch")
     ap.add_argument("--quick", action="store_true", help="fewer steps (smoke test)")
     args = ap.parse_args()
     steps = 2000 if args.quick else args.steps
@@ -116,8 +121,31 @@ def main() -> None:
     print(f"parallel efficiency on {cores} threads: {eff:.3f}")
     print(f"memory per particle (state + scratch, capacity {batch.capacity}): "
           f"{mem / (args.batch * n):.0f} B")
+
+    # a large batch (the MPM's use): core-ns per particle-step on one thread, and the
+    # parallel efficiency of the same batch on all threads
+    bigs = []
+    for _ in range(args.big_batch):
+        c = base.copy()
+        c.v += rng.normal(0.0, 1e-4, c.v.shape)
+        bigs.append(c)
+    big = concatenate(bigs)
+    ctrl = shear_control(big)
+    engine.advance(big, 10, dt, cp, ctrl)
+    gsteps = 40 if args.quick else max(steps // 50, 100)
+    numba.set_num_threads(1)
+    g1 = time_steps(big, cp, ctrl, dt, gsteps, repeats=2)
+    numba.set_num_threads(cores)
+    gp = time_steps(big, cp, ctrl, dt, gsteps, repeats=2)
+    ns_batch = g1 / (args.big_batch * n * gsteps) * 1e9
+    eff_batch = g1 / (cores * gp)
+    print(f"\nbatch of {args.big_batch} RVEs x {n} spheres, {gsteps} steps: "
+          f"{ns_batch:.1f} core-ns/particle-step on 1 thread, parallel efficiency "
+          f"{eff_batch:.3f} on {cores} threads")
     print(json.dumps({
         "ns_per_particle_step": round(ns_default, 2), "parallel_efficiency": round(eff, 3),
+        "ns_per_particle_step_batch": round(ns_batch, 2), "batch_rves": args.big_batch,
+        "parallel_efficiency_batch": round(eff_batch, 3),
         "threads": cores, "particle_steps_per_s_all_threads": round(psp),
         "bytes_per_particle": round(mem / (args.batch * n)),
         "skin_variants_ns": {str(s): round(v, 2) for s, v, _ in rows},

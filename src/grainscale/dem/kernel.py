@@ -63,6 +63,16 @@ from numba import njit, prange
 from grainscale.dem.neighbours import Status, build, image_table
 from grainscale.linalg3 import det3, inv3
 
+# unsigned offsets into flat (3n,) views: numba then emits no negative-index wrap-around,
+# which is what keeps LLVM from vectorising the particle loops (docs/performance.md)
+U1 = np.uintp(1)
+U2 = np.uintp(2)
+U3 = np.uintp(3)
+# fast-math flags of the vectorised per-particle loops: no reassociation and no FMA
+# contraction, so that their vector body and scalar remainder round alike and a
+# particle's result does not depend on where the array's alignment puts it (MPI ranks
+# and batches allocate differently)
+ELEMENTWISE = {"nnan", "ninf", "nsz", "arcp", "afn"}
 SERVO_EVERY = 4  # steps between stress samples of a servo
 
 
@@ -151,6 +161,30 @@ def _sgn(a):
     return 1.0 if a != 0.0 else 0.0
 
 
+@njit(cache=True, fastmath=ELEMENTWISE, error_model="numpy")
+def _positions(h, s, x, force, torque):
+    """x = h s (Cartesian positions [m]); force and torque zeroed."""
+    h00, h01, h02 = h[0, 0], h[0, 1], h[0, 2]
+    h10, h11, h12 = h[1, 0], h[1, 1], h[1, 2]
+    h20, h21, h22 = h[2, 0], h[2, 1], h[2, 2]
+    n = s.shape[0]
+    sf = s.reshape(3 * n)
+    xf = x.reshape(3 * n)
+    ff = force.reshape(3 * n)
+    tf = torque.reshape(3 * n)
+    for i in range(n):
+        a = U3 * np.uintp(i)
+        s0 = sf[a]
+        s1 = sf[a + U1]
+        s2 = sf[a + U2]
+        xf[a] = h00 * s0 + h01 * s1 + h02 * s2
+        xf[a + U1] = h10 * s0 + h11 * s1 + h12 * s2
+        xf[a + U2] = h20 * s0 + h21 * s1 + h22 * s2
+    for a in range(3 * n):
+        ff[a] = 0.0
+        tf[a] = 0.0
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
     """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
@@ -171,11 +205,7 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
     nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
     force, torque, x = st.force, st.torque, st.x
     n = s.shape[0]
-    for i in range(n):
-        for d in range(3):
-            x[i, d] = h[d, 0] * s[i, 0] + h[d, 1] * s[i, 1] + h[d, 2] * s[i, 2]
-            force[i, d] = 0.0
-            torque[i, d] = 0.0
+    _positions(h, s, x, force, torque)
     image_table(h, table)
     # mean-field spin (axial vector of the skew part of L) turns the contact frames
     sp0 = 0.5 * (L[2, 1] - L[1, 2])
@@ -191,26 +221,39 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
     c00 = c11 = c22 = c01 = c02 = c12 = 0.0
     ncontact = 0
     fsum = 0.0
+    xf = x.reshape(3 * n)
+    vf = v.reshape(3 * n)
+    wf = w.reshape(3 * n)
+    ff = force.reshape(3 * n)
+    tf = torque.reshape(3 * n)
+    kcap = ft.shape[1]
+    ftf = ft.reshape(3 * n * kcap)
+    tab = table.reshape(81)
     for i in range(n):
         xi0 = x[i, 0]
         xi1 = x[i, 1]
         xi2 = x[i, 2]
         ri = radius[i]
+        i3 = U3 * np.uintp(i)
+        rowk = U3 * np.uintp(kcap) * np.uintp(i)
         fi0 = fi1 = fi2 = 0.0
         ti0 = ti1 = ti2 = 0.0
         for k in range(nbr_count[i]):
-            j = nbr_j[i, k]
+            j = np.uintp(nbr_j[i, k])  # unsigned: no negative-index wraparound
             t = nbr_shift[i, k]
-            d0 = x[j, 0] - xi0 + table[t, 0]
-            d1 = x[j, 1] - xi1 + table[t, 1]
-            d2 = x[j, 2] - xi2 + table[t, 2]
+            j3 = U3 * j
+            t3 = U3 * np.uintp(t)
+            q = rowk + U3 * np.uintp(k)
+            d0 = xf[j3] - xi0 + tab[t3]
+            d1 = xf[j3 + U1] - xi1 + tab[t3 + U1]
+            d2 = xf[j3 + U2] - xi2 + tab[t3 + U2]
             rj = radius[j]
             rr = ri + rj
             dist2 = d0 * d0 + d1 * d1 + d2 * d2
             if dist2 >= rr * rr:
-                ft[i, k, 0] = 0.0
-                ft[i, k, 1] = 0.0
-                ft[i, k, 2] = 0.0
+                ftf[q] = 0.0
+                ftf[q + U1] = 0.0
+                ftf[q + U2] = 0.0
                 continue
             dist = math.sqrt(dist2)
             inv2 = 1.0 / (dist * rr)  # one division serves 1/dist and 1/rr
@@ -229,23 +272,23 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
             half = 0.5 * (rr - dist)
             li = ri - half
             lj = rj - half
-            wa0 = li * w[i, 0] + lj * w[j, 0]
-            wa1 = li * w[i, 1] + lj * w[j, 1]
-            wa2 = li * w[i, 2] + lj * w[j, 2]
-            vr0 = v[j, 0] - v[i, 0] + D00 * d0 + D01 * d1 + D02 * d2 - (wa1 * n2 - wa2 * n1)
-            vr1 = v[j, 1] - v[i, 1] + D01 * d0 + D11 * d1 + D12 * d2 - (wa2 * n0 - wa0 * n2)
-            vr2 = v[j, 2] - v[i, 2] + D02 * d0 + D12 * d1 + D22 * d2 - (wa0 * n1 - wa1 * n0)
+            wa0 = li * wf[i3] + lj * wf[j3]
+            wa1 = li * wf[i3 + U1] + lj * wf[j3 + U1]
+            wa2 = li * wf[i3 + U2] + lj * wf[j3 + U2]
+            vr0 = vf[j3] - vf[i3] + D00 * d0 + D01 * d1 + D02 * d2 - (wa1 * n2 - wa2 * n1)
+            vr1 = vf[j3 + U1] - vf[i3 + U1] + D01 * d0 + D11 * d1 + D12 * d2 - (wa2 * n0 - wa0 * n2)
+            vr2 = vf[j3 + U2] - vf[i3 + U2] + D02 * d0 + D12 * d1 + D22 * d2 - (wa0 * n1 - wa1 * n0)
             vn = vr0 * n0 + vr1 * n1 + vr2 * n2
             if gamma > 0.0:
                 mst = mass[i] * mass[j] / (mass[i] + mass[j])
                 fn -= 2.0 * gamma * math.sqrt(mst * kn) * vn
             # history: turn with the contact frame (mean-field spin plus the particles'
             # twist about n, to first order in dt), then drop its normal component
-            f0 = ft[i, k, 0]
-            f1 = ft[i, k, 1]
-            f2 = ft[i, k, 2]
-            tw = 0.5 * ((w[i, 0] + w[j, 0]) * n0 + (w[i, 1] + w[j, 1]) * n1
-                        + (w[i, 2] + w[j, 2]) * n2)
+            f0 = ftf[q]
+            f1 = ftf[q + U1]
+            f2 = ftf[q + U2]
+            tw = 0.5 * ((wf[i3] + wf[j3]) * n0 + (wf[i3 + U1] + wf[j3 + U1]) * n1
+                        + (wf[i3 + U2] + wf[j3 + U2]) * n2)
             o0 = (sp0 + tw * n0) * dt
             o1 = (sp1 + tw * n1) * dt
             o2 = (sp2 + tw * n2) * dt
@@ -267,9 +310,9 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
                 f0 *= sc
                 f1 *= sc
                 f2 *= sc
-            ft[i, k, 0] = f0
-            ft[i, k, 1] = f1
-            ft[i, k, 2] = f2
+            ftf[q] = f0
+            ftf[q + U1] = f1
+            ftf[q + U2] = f2
             # total force on i
             F0 = f0 - fn * n0
             F1 = f1 - fn * n1
@@ -277,9 +320,9 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
             fi0 += F0
             fi1 += F1
             fi2 += F2
-            force[j, 0] -= F0
-            force[j, 1] -= F1
-            force[j, 2] -= F2
+            ff[j3] -= F0
+            ff[j3 + U1] -= F1
+            ff[j3 + U2] -= F2
             # torques: only the tangential part has a lever arm (li n on i, lj n on j)
             tq0 = n1 * f2 - n2 * f1
             tq1 = n2 * f0 - n0 * f2
@@ -287,9 +330,9 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
             ti0 += li * tq0
             ti1 += li * tq1
             ti2 += li * tq2
-            torque[j, 0] += lj * tq0
-            torque[j, 1] += lj * tq1
-            torque[j, 2] += lj * tq2
+            tf[j3] += lj * tq0
+            tf[j3 + U1] += lj * tq1
+            tf[j3 + U2] += lj * tq2
             ncontact += 1
             fsum += fn
             if not homogenise:
@@ -355,6 +398,104 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
     return ncontact, fsum
 
 
+@njit(cache=True, fastmath=ELEMENTWISE, error_model="numpy")
+def _translate(v, s, s_ref, force, inv_m, L, hinv, dt, damping):
+    """Translational step of every particle, in place: v += dt (F - damping |F| sign v)/m
+    - dt L v (inv_m holds dt/m; the last term is the pseudo-force -m L v of the co-moving
+    frame, SLLOD: a grain that feels no force keeps its lab-frame velocity while the cell
+    deforms), then s += h^-1 v dt. Returns max |s - s_ref|^2 (fractional displacement
+    since the last list build, for the list check)."""
+    L00, L01, L02 = L[0, 0], L[0, 1], L[0, 2]
+    L10, L11, L12 = L[1, 0], L[1, 1], L[1, 2]
+    L20, L21, L22 = L[2, 0], L[2, 1], L[2, 2]
+    h00, h01, h02 = hinv[0, 0], hinv[0, 1], hinv[0, 2]
+    h10, h11, h12 = hinv[1, 0], hinv[1, 1], hinv[1, 2]
+    h20, h21, h22 = hinv[2, 0], hinv[2, 1], hinv[2, 2]
+    n = v.shape[0]
+    vf = v.reshape(3 * n)
+    sf = s.reshape(3 * n)
+    rf = s_ref.reshape(3 * n)
+    ff = force.reshape(3 * n)
+    umax2 = 0.0
+    for i in range(n):
+        a = U3 * np.uintp(i)
+        im = inv_m[i]
+        f0 = ff[a]
+        f1 = ff[a + U1]
+        f2 = ff[a + U2]
+        u0 = vf[a]
+        u1 = vf[a + U1]
+        u2 = vf[a + U2]
+        lv0 = dt * (L00 * u0 + L01 * u1 + L02 * u2)
+        lv1 = dt * (L10 * u0 + L11 * u1 + L12 * u2)
+        lv2 = dt * (L20 * u0 + L21 * u1 + L22 * u2)
+        u0 += im * (f0 - damping * math.copysign(f0, u0) * _sgn(u0)) - lv0
+        u1 += im * (f1 - damping * math.copysign(f1, u1) * _sgn(u1)) - lv1
+        u2 += im * (f2 - damping * math.copysign(f2, u2) * _sgn(u2)) - lv2
+        vf[a] = u0
+        vf[a + U1] = u1
+        vf[a + U2] = u2
+        v0 = u0 * dt
+        v1 = u1 * dt
+        v2 = u2 * dt
+        s0 = sf[a] + (h00 * v0 + h01 * v1 + h02 * v2)
+        s1 = sf[a + U1] + (h10 * v0 + h11 * v1 + h12 * v2)
+        s2 = sf[a + U2] + (h20 * v0 + h21 * v1 + h22 * v2)
+        sf[a] = s0
+        sf[a + U1] = s1
+        sf[a + U2] = s2
+    for i in range(n):
+        a = U3 * np.uintp(i)
+        e0 = sf[a] - rf[a]
+        e1 = sf[a + U1] - rf[a + U1]
+        e2 = sf[a + U2] - rf[a + U2]
+        umax2 = max(umax2, e0 * e0 + e1 * e1 + e2 * e2)
+    return umax2
+
+
+@njit(cache=True, fastmath=ELEMENTWISE, error_model="numpy")
+def _rotate(w, rot, torque, inv_i, dt, damping):
+    """Rotational step, in place: w += dt (T - damping |T| sign w)/I (inv_i holds dt/I);
+    rot += |w| dt, the accumulated rotation angle [rad]."""
+    n = w.shape[0]
+    wf = w.reshape(3 * n)
+    tf = torque.reshape(3 * n)
+    for i in range(n):
+        a = U3 * np.uintp(i)
+        ii = inv_i[i]
+        t0 = tf[a]
+        t1 = tf[a + U1]
+        t2 = tf[a + U2]
+        a0 = wf[a]
+        a1 = wf[a + U1]
+        a2 = wf[a + U2]
+        a0 += ii * (t0 - damping * math.copysign(t0, a0) * _sgn(a0))
+        a1 += ii * (t1 - damping * math.copysign(t1, a1) * _sgn(a1))
+        a2 += ii * (t2 - damping * math.copysign(t2, a2) * _sgn(a2))
+        wf[a] = a0
+        wf[a + U1] = a1
+        wf[a + U2] = a2
+        rot[i] += math.sqrt(a0 * a0 + a1 * a1 + a2 * a2) * dt
+
+
+@njit(cache=True, fastmath={"nnan", "ninf", "nsz", "arcp", "contract", "afn"},
+      error_model="numpy")
+def _residuals(force, v, w, mass, inertia):
+    """Sum of |F| [N] and the kinetic energy [J], in particle order (no reassociation:
+    the sums are the same whatever the vector width)."""
+    fres = 0.0
+    ekin = 0.0
+    for i in range(v.shape[0]):
+        f0 = force[i, 0]
+        f1 = force[i, 1]
+        f2 = force[i, 2]
+        fres += math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+        w2 = w[i, 0] * w[i, 0] + w[i, 1] * w[i, 1] + w[i, 2] * w[i, 2]
+        vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
+        ekin += 0.5 * (mass[i] * vv + inertia[i] * w2)
+    return fres, ekin
+
+
 @njit(cache=True, fastmath=True, error_model="numpy")
 def advance_rve(nsteps, law, st, ctl, out):
     """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
@@ -396,6 +537,9 @@ def advance_rve(nsteps, law, st, ctl, out):
         for b in range(3):
             if servo_mask[a, b] != 0:
                 servo_on = True
+    fres = 0.0
+    ekin = 0.0
+    umax2 = 0.0
     for _step in range(nsteps):
         # 1. neighbour list, if the last step's check (7) asked for it
         if need_rebuild[0] != 0:
@@ -447,7 +591,10 @@ def advance_rve(nsteps, law, st, ctl, out):
         # last step homogenises anyway: the write costs nothing
         report = sample or (last and not servo_on)
         stiff_out = stiffness if report else stiff_scratch
-        ncontact, fsum = contact_pass(dt, law, st, table, sig_out, stiff_out, sample or last)
+        if sample or last:  # two specialisations: the hot one keeps no stress sums live
+            ncontact, fsum = contact_pass(dt, law, st, table, sig_out, stiff_out, True)
+        else:
+            ncontact, fsum = contact_pass(dt, law, st, table, sig_out, stiff_out, False)
         if sample and last:
             stress[:, :] = stress_servo
         step_count[0] += 1
@@ -456,47 +603,11 @@ def advance_rve(nsteps, law, st, ctl, out):
             for b in range(3):
                 h[a, b] = hnew[a, b]
         inv3(h, hinv)
-        # 6. integration (damping opposes the fluctuating velocity, seed's YADE style)
-        umax2 = 0.0
-        fres = 0.0
-        ekin = 0.0
-        for i in range(n):
-            im = inv_m[i]
-            ii = inv_i[i]
-            f0 = force[i, 0]
-            f1 = force[i, 1]
-            f2 = force[i, 2]
-            t0 = torque[i, 0]
-            t1 = torque[i, 1]
-            t2 = torque[i, 2]
-            if last:
-                fres += math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
-            # the pseudo-force -m L v' of the co-moving frame (SLLOD): a grain that
-            # feels no force keeps its lab-frame velocity while the cell deforms
-            lv0 = dt * (L[0, 0] * v[i, 0] + L[0, 1] * v[i, 1] + L[0, 2] * v[i, 2])
-            lv1 = dt * (L[1, 0] * v[i, 0] + L[1, 1] * v[i, 1] + L[1, 2] * v[i, 2])
-            lv2 = dt * (L[2, 0] * v[i, 0] + L[2, 1] * v[i, 1] + L[2, 2] * v[i, 2])
-            v[i, 0] += im * (f0 - damping * math.copysign(f0, v[i, 0]) * _sgn(v[i, 0])) - lv0
-            v[i, 1] += im * (f1 - damping * math.copysign(f1, v[i, 1]) * _sgn(v[i, 1])) - lv1
-            v[i, 2] += im * (f2 - damping * math.copysign(f2, v[i, 2]) * _sgn(v[i, 2])) - lv2
-            w[i, 0] += ii * (t0 - damping * math.copysign(t0, w[i, 0]) * _sgn(w[i, 0]))
-            w[i, 1] += ii * (t1 - damping * math.copysign(t1, w[i, 1]) * _sgn(w[i, 1]))
-            w[i, 2] += ii * (t2 - damping * math.copysign(t2, w[i, 2]) * _sgn(w[i, 2]))
-            v0 = v[i, 0] * dt
-            v1 = v[i, 1] * dt
-            v2 = v[i, 2] * dt
-            s[i, 0] += hinv[0, 0] * v0 + hinv[0, 1] * v1 + hinv[0, 2] * v2
-            s[i, 1] += hinv[1, 0] * v0 + hinv[1, 1] * v1 + hinv[1, 2] * v2
-            s[i, 2] += hinv[2, 0] * v0 + hinv[2, 1] * v1 + hinv[2, 2] * v2
-            w2 = w[i, 0] * w[i, 0] + w[i, 1] * w[i, 1] + w[i, 2] * w[i, 2]
-            rot[i] += math.sqrt(w2) * dt
-            if last:
-                vv = v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2]
-                ekin += 0.5 * (mass[i] * vv + inertia[i] * w2)
-            e0 = s[i, 0] - s_ref[i, 0]
-            e1 = s[i, 1] - s_ref[i, 1]
-            e2 = s[i, 2] - s_ref[i, 2]
-            umax2 = max(umax2, e0 * e0 + e1 * e1 + e2 * e2)
+        # 6. integration, in loops LLVM can vectorise over particles (few arrays each)
+        umax2 = _translate(v, s, s_ref, force, inv_m, L, hinv, dt, damping)
+        _rotate(w, rot, torque, inv_i, dt, damping)
+        if last:
+            fres, ekin = _residuals(force, v, w, mass, inertia)
         # 7. is the list still complete? |h ds| <= |h|_2 |ds| and
         # |h|_2 <= sqrt(|h|_1 |h|_inf) bound the fluctuating displacement cheaply
         n1 = max(abs(h[0, 0]) + abs(h[1, 0]) + abs(h[2, 0]),
