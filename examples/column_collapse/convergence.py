@@ -132,6 +132,8 @@ def plot(results: list[dict], histories: dict, deposits: dict, png: Path) -> Non
         after = h["t_over_tc"] >= 0
         ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], styles[r["material"]],
                 color=colours[r["cell_mm"]], label=f"{r['label']}, {r['cell_mm']:g} mm")
+        if r["cell_mm"] not in sizes[-2:]:  # profiles of the two finest grids only
+            continue
         edges, thick = deposits[(r["material"], r["cell_mm"])]
         cx.step(edges / LENGTH, thick * 1e3, styles[r["material"]], where="post",
                 color=colours[r["cell_mm"]], lw=1, label=f"{r['label']}, {r['cell_mm']:g} mm")
@@ -145,12 +147,15 @@ def plot(results: list[dict], histories: dict, deposits: dict, png: Path) -> Non
     for mat in dict.fromkeys(r["material"] for r in results):
         rows = sorted((r for r in results if r["material"] == mat), key=lambda r: r["cell_mm"])
         bx.plot([r["cell_mm"] for r in rows], [r["runout"] for r in rows],
-                styles[mat] + "o", color="k", label=rows[0]["label"])
+                styles[mat] + "o", color="k", label=f"{rows[0]['label']}: front")
+        bx.plot([r["cell_mm"] for r in rows], [r["runout_3d"] for r in rows],
+                styles[mat] + "s", color="tab:green", mfc="none",
+                label=f"{rows[0]['label']}: deposit >= 3 beads thick")
     bx.set_xscale("log")
     bx.set_xticks(sizes, [f"{mm:g}" for mm in sizes])
     bx.minorticks_off()
     bx.set_xlabel("cell size (mm)")
-    bx.set_ylabel("final runout at 7 tau_c")
+    bx.set_ylabel("final runout (L_f - L_i) / L_i at 7 tau_c")
     bx.set_ylim(bottom=0)
     bx.legend(fontsize=7)
     for k in (2, 3):
