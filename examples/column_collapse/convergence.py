@@ -1,11 +1,14 @@
 """Grid convergence of the continuum column collapse (mu(I) and Mohr-Coulomb).
 
     python examples/column_collapse/convergence.py --out DIR [--cells 10 5 2.5 1.25]
-        [--materials mu_i mohr_coulomb] [--friction-angle 22]
+        [--materials mu_i mohr_coulomb] [--friction-angle 22] [--points-per-cell 2]
+        [--floor friction|fixed|penalty] [--cfl 0.5]
 
 Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
 a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
-density and elastic moduli), to 7 tau_c. The slice stays one cell thick. A run whose
+density and elastic moduli), to 7 tau_c. The slice stays one cell thick. The options
+vary the points per cell, the floor's discretisation and the time step (run folders
+get a suffix such as _n4_penalty_cfl0.25). A run whose
 history already reaches the end is not repeated, so the study can be extended or
 resumed. Writes DIR/results.json, DIR/convergence.png (runout against t / tau_c for every
 run beside Lube et al. 2005, 1.2 a, and Lajeunesse et al. 2005, 1.8 a; final runout
@@ -43,18 +46,37 @@ BEAD = 1.15e-3  # m, the diameter of Lajeunesse et al.'s glass beads
 X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 
 
-def case_at(h: float, material: str, friction_angle: float) -> dict:
+def case_at(h: float, material: str, friction_angle: float, points_per_cell: int = 2,
+            floor: str = "friction", cfl: float = 0.5) -> dict:
     """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
-    twin."""
+    twin; n x n x n points a cell; the floor as in mu_i.toml (`friction`, Coulomb 0.466
+    on the grid nodes), no-slip (`fixed`), or a rigid box under z = 0 with the penalty
+    contact and the same friction (`penalty`, docs/mpm.md: rigid body; the grid then
+    reaches two cells below the floor)."""
     case = tomllib.loads((HERE / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
     case["bodies"][0]["hi"][1] = h
+    case["bodies"][0]["points_per_cell"] = points_per_cell
+    case["solver"]["cfl"] = cfl
     for bc in case["boundaries"]:
         if "box" in bc:
             bc["box"]["hi"][1] = h
             if bc.get("normal") == "y":
                 bc["box"]["lo"][1] = h
+    floor_bc = case["boundaries"][0]
+    assert floor_bc.get("face") == "z-" and floor_bc["type"] == "friction"
+    if floor == "fixed":
+        case["boundaries"][0] = {"type": "fixed", "face": "z-"}
+    elif floor == "penalty":
+        del case["boundaries"][0]
+        case["grid"]["origin"][2] = -2 * h
+        case["grid"]["cells"][2] += 2
+        case["rigid"] = {"shape": "box", "lo": [-h, -h, -2 * h], "hi": [X_EXTENT + h, 2 * h, 0.0],
+                         "velocity": [0.0, 0.0, 0.0], "contact": "penalty", "clip_to_grid": True,
+                         "friction": floor_bc["friction"]}
+    elif floor != "friction":
+        raise ValueError(f"floor = {floor!r}: one of friction, fixed, penalty")
     if material == "mohr_coulomb":
         mu = case["materials"]["beads"]
         case["materials"]["beads"] = {
@@ -65,6 +87,11 @@ def case_at(h: float, material: str, friction_angle: float) -> dict:
     return case
 
 
+def variant(points_per_cell: int, floor: str, cfl: float) -> str:
+    """Suffix of a run folder for the non-default options ('' for mu_i.toml's)."""
+    return ((f"_n{points_per_cell}" if points_per_cell != 2 else "")
+            + (f"_{floor}" if floor != "friction" else "")
+            + (f"_cfl{cfl:g}" if cfl != 0.5 else ""))
 
 
 def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
@@ -180,13 +207,17 @@ def main() -> None:
                     choices=["mu_i", "mohr_coulomb"])
     ap.add_argument("--friction-angle", type=float, default=22.0,
                     help="Mohr-Coulomb friction angle (deg)")
+    ap.add_argument("--points-per-cell", type=int, default=2, help="n: n^3 points a cell")
+    ap.add_argument("--floor", default="friction", choices=["friction", "fixed", "penalty"])
+    ap.add_argument("--cfl", type=float, default=0.5)
     args = ap.parse_args()
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
         for mm in sorted(args.cells, reverse=True):
-            out = args.out / f"{mat}_{mm:g}mm"
-            case = case_at(mm * 1e-3, mat, args.friction_angle)
+            out = args.out / f"{mat}_{mm:g}mm{variant(args.points_per_cell, args.floor, args.cfl)}"
+            case = case_at(mm * 1e-3, mat, args.friction_angle, args.points_per_cell,
+                           args.floor, args.cfl)
             wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h
