@@ -86,7 +86,12 @@ def read_history(path: Path) -> dict[str, np.ndarray]:
 
 
 def load_run(out: Path) -> dict:
-    """d/R and p_u/(rho g R) of the intrusion stage of one run, and its label."""
+    """d/R and p_u/(rho g R) of the intrusion stage of one run, and its label (the name of
+    OUT; a study's folder holding the run in OUT/run, as baselines.py and mc_variants.py
+    write them, is read there)."""
+    name = out.resolve().name
+    if not (out / "history.csv").is_file() and (out / "run" / "history.csv").is_file():
+        out = out / "run"
     path = out / "history.csv"
     h = read_history(path)
     for col in REQUIRED:
@@ -105,7 +110,6 @@ def load_run(out: Path) -> dict:
             shape = tomllib.loads(case.read_text()).get("rigid", {}).get("shape")
         except tomllib.TOMLDecodeError as err:
             raise InputError(f"{case}: {err}") from None
-    name = out.resolve().name
     return {"label": f"{name} ({shape})" if shape else name, "folder": str(out),
             "shape": shape, "x": x, "y": y}
 
