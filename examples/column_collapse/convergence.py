@@ -107,7 +107,7 @@ def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
 
 def deposit(run: Path, case: dict) -> tuple[np.ndarray, np.ndarray]:
     """Thickness of the last frame's deposit along x (bins one point spacing wide, point
-    domains of half-width cell / (2 n)): bin edges and thicknesses [m]."""
+    domains of half-width cell / (2 n)): bin boundaries and thicknesses [m]."""
     frames = PVDSeries.load(run / "frames.pvd").entries
     x, _ = read_points_vtu(run / frames[-1][1])
     spacing = case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
@@ -162,8 +162,8 @@ def plot(results: list[dict], histories: dict, deposits: dict, png: Path) -> Non
         if r["cell_mm"] not in sizes[-2:]:  # profiles of the two finest grids only
             continue
         edges, thick = deposits[(r["material"], r["cell_mm"])]
-        cx.step(edges / LENGTH, thick * 1e3, styles[r["material"]], where="post",
-                color=colours[r["cell_mm"]], lw=1, label=f"{r['label']}, {r['cell_mm']:g} mm")
+        cx.stairs(thick * 1e3, edges / LENGTH, ls=styles[r["material"]],
+                  color=colours[r["cell_mm"]], lw=1, label=f"{r['label']}, {r['cell_mm']:g} mm")
     for b in (ax, bx):
         experiment_bands(b)
     ax.set_xlabel("t / tau_c")

@@ -26,8 +26,10 @@ def test_profile_of_a_wedge_follows_its_surface():
     x, z = _wedge(H, slope, d)
     edges, thick = deposit_profile(x, z, d / 2, d)
     assert edges[0] == pytest.approx(0.0, abs=1e-15)
-    assert np.all(thick <= H - slope * edges + 1e-12)
-    assert np.all(thick >= H - slope * (edges + d) - d - 1e-12)
+    assert len(edges) == len(thick) + 1
+    np.testing.assert_allclose(np.diff(edges), d, rtol=1e-12)
+    assert np.all(thick <= H - slope * edges[:-1] + 1e-12)
+    assert np.all(thick >= H - slope * edges[1:] - d - 1e-12)
 
 
 @pytest.mark.parametrize("minimum", [1e-3, 5e-3, 20e-3])

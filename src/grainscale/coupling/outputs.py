@@ -119,24 +119,21 @@ def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
                     spacing: float, base: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Thickness of a layer of points along one axis: bins of width `spacing` [m] from the
     first point domain's rear edge; in each, the highest point-domain edge above `base`
-    (max of up + lp - base, 0 where a bin holds no point centre). Returns the bins' lower
-    edges and the thicknesses [m]."""
+    (max of up + lp - base, 0 where a bin holds no point centre). Returns the n + 1 bin
+    boundaries and the n thicknesses [m]."""
     lp = np.broadcast_to(np.asarray(lp, dtype=float), along.shape)
     start = float((along - lp).min())
     idx = np.floor((along - start) / spacing).astype(np.int64)
     thick = np.zeros(int(idx.max()) + 1)
     np.maximum.at(thick, idx, up + lp - base)
-    return start + spacing * np.arange(len(thick)), thick
+    return start + spacing * np.arange(len(thick) + 1), thick
 
 
 def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float) -> float:
-    """The far end [m] of the last bin of a deposit_profile at least `minimum` [m] thick
-    (a front that ignores a tail thinner than `minimum`); NaN if none is."""
+    """The far boundary [m] of the last bin of a deposit_profile at least `minimum` [m]
+    thick (a front that ignores a tail thinner than `minimum`); NaN if none is."""
     thick = np.flatnonzero(thickness >= minimum)
-    if not thick.size:
-        return math.nan
-    spacing = edges[1] - edges[0] if len(edges) > 1 else 0.0
-    return float(edges[thick[-1]] + spacing)
+    return float(edges[thick[-1] + 1]) if thick.size else math.nan
 
 
 def point_fields(pts: Points, fields: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
