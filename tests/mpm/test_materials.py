@@ -178,3 +178,26 @@ def test_drucker_prager_returns_onto_cone():
     f = q - mat.M * p - mat.k
     assert np.all(f <= 1e-9 * np.abs(stress).max())
     assert (mat.eps_p > 0).sum() > 50
+
+
+def test_mohr_coulomb_simple_shear_is_rate_and_step_independent():
+    """Simple shear (x-z) of a non-dilatant Mohr-Coulomb point from isotropic 500 Pa to a
+    shear of 0.2: the steady shear stress is s_xz = p sin(phi) (plane-strain, psi = 0: the
+    velocity characteristics carry tau/sigma_n = sin phi), whatever the number of
+    increments, 100 or 10,000 (the return is exact per increment; 1e-9 relative covers
+    round-off), so a column's dependence on the MPM step is not the material's."""
+    def shear(n):
+        m = MohrCoulomb("m", 1, density=1500.0, youngs_modulus=2e6, poisson_ratio=0.3,
+                        friction_angle=22.0)
+        sig = -500.0 * np.eye(3)[None].copy()
+        dH = np.zeros((1, 3, 3))
+        dH[0, 0, 2] = 0.2 / n
+        for _ in range(n):
+            m.update(dH, 1e-3, sig)
+        return sig[0]
+
+    coarse, fine = shear(100), shear(10_000)
+    np.testing.assert_allclose(coarse, fine, rtol=1e-9, atol=1e-9 * 500.0)
+    p = -np.trace(fine) / 3.0
+    assert p == pytest.approx(500.0, rel=1e-9)
+    assert fine[0, 2] == pytest.approx(p * np.sin(np.radians(22.0)), rel=1e-6)
