@@ -2,7 +2,7 @@
 
     python examples/column_collapse/convergence.py --out DIR [--cells 10 5 2.5 1.25]
         [--materials mu_i mohr_coulomb] [--friction-angle 22] [--points-per-cell 2]
-        [--floor friction|fixed|penalty] [--cfl 0.5]
+        [--floor friction|fixed|roller|penalty] [--cfl 0.5] [--t-end 7]
 
 Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
 a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 import tomllib
 from pathlib import Path
@@ -47,18 +48,21 @@ X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 
 
 def case_at(h: float, material: str, friction_angle: float, points_per_cell: int = 2,
-            floor: str = "friction", cfl: float = 0.5) -> dict:
+            floor: str = "friction", cfl: float = 0.5, t_end: float = 7.0) -> dict:
     """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
     twin; n x n x n points a cell; the floor as in mu_i.toml (`friction`, Coulomb 0.466
-    on the grid nodes), no-slip (`fixed`), or a rigid box under z = 0 with the penalty
+    on the grid nodes), no-slip (`fixed`), frictionless (`roller`: the mass slides on
+    and leaves the grid, compare at early times), or a rigid box under z = 0 with the penalty
     contact and the same friction (`penalty`, docs/mpm.md: rigid body; the grid then
-    reaches two cells below the floor)."""
+    reaches two cells below the floor); runs end at t_end tau_c."""
     case = tomllib.loads((HERE / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
     case["bodies"][0]["hi"][1] = h
     case["bodies"][0]["points_per_cell"] = points_per_cell
     case["solver"]["cfl"] = cfl
+    if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
+        case["time"]["end"] = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
     for bc in case["boundaries"]:
         if "box" in bc:
             bc["box"]["hi"][1] = h
@@ -66,8 +70,8 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
                 bc["box"]["lo"][1] = h
     floor_bc = case["boundaries"][0]
     assert floor_bc.get("face") == "z-" and floor_bc["type"] == "friction"
-    if floor == "fixed":
-        case["boundaries"][0] = {"type": "fixed", "face": "z-"}
+    if floor in ("fixed", "roller"):
+        case["boundaries"][0] = {"type": floor, "face": "z-"}
     elif floor == "penalty":
         del case["boundaries"][0]
         case["grid"]["origin"][2] = -2 * h
@@ -76,7 +80,7 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
                          "velocity": [0.0, 0.0, 0.0], "contact": "penalty", "clip_to_grid": True,
                          "friction": floor_bc["friction"]}
     elif floor != "friction":
-        raise ValueError(f"floor = {floor!r}: one of friction, fixed, penalty")
+        raise ValueError(f"floor = {floor!r}: one of friction, fixed, roller, penalty")
     if material == "mohr_coulomb":
         mu = case["materials"]["beads"]
         case["materials"]["beads"] = {
@@ -87,11 +91,12 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     return case
 
 
-def variant(points_per_cell: int, floor: str, cfl: float) -> str:
+def variant(points_per_cell: int, floor: str, cfl: float, t_end: float) -> str:
     """Suffix of a run folder for the non-default options ('' for mu_i.toml's)."""
     return ((f"_n{points_per_cell}" if points_per_cell != 2 else "")
             + (f"_{floor}" if floor != "friction" else "")
-            + (f"_cfl{cfl:g}" if cfl != 0.5 else ""))
+            + (f"_cfl{cfl:g}" if cfl != 0.5 else "")
+            + (f"_t{t_end:g}" if t_end != 7.0 else ""))
 
 
 def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
@@ -208,16 +213,19 @@ def main() -> None:
     ap.add_argument("--friction-angle", type=float, default=22.0,
                     help="Mohr-Coulomb friction angle (deg)")
     ap.add_argument("--points-per-cell", type=int, default=2, help="n: n^3 points a cell")
-    ap.add_argument("--floor", default="friction", choices=["friction", "fixed", "penalty"])
+    ap.add_argument("--floor", default="friction",
+                    choices=["friction", "fixed", "roller", "penalty"])
     ap.add_argument("--cfl", type=float, default=0.5)
+    ap.add_argument("--t-end", type=float, default=7.0, help="end of the runs, in tau_c")
     args = ap.parse_args()
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
         for mm in sorted(args.cells, reverse=True):
-            out = args.out / f"{mat}_{mm:g}mm{variant(args.points_per_cell, args.floor, args.cfl)}"
+            suffix = variant(args.points_per_cell, args.floor, args.cfl, args.t_end)
+            out = args.out / f"{mat}_{mm:g}mm{suffix}"
             case = case_at(mm * 1e-3, mat, args.friction_angle, args.points_per_cell,
-                           args.floor, args.cfl)
+                           args.floor, args.cfl, args.t_end)
             wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h
