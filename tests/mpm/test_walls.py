@@ -131,7 +131,7 @@ def test_points_that_crossed_a_wall_are_put_back_on_it():
     assert x[3, 2] == 0.45
 
 
-@pytest.mark.parametrize("update", ["apic", "flip"])
+@pytest.mark.parametrize("update", ["apic", "flip", "aflip"])
 @pytest.mark.parametrize("floor", ["fixed", "wall"])
 def test_the_wall_impulse_reaches_the_points(update, floor):
     """After G2P the points carry the grid's momentum, sum m_p v_p = sum m_I v_I, wall

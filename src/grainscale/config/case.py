@@ -42,10 +42,12 @@ class GridCfg(StrictModel):
 class SolverCfg(StrictModel):
     scheme: Literal["USF", "USL", "MUSL"] = "USF"
     shape: Literal["GIMP", "linear"] = "GIMP"
-    # point velocity update: "apic" (affine PIC) or "flip" (the FLIP/PIC blend of `flip`,
-    # whose PIC share dissipates once per step, so by an amount that depends on dt)
-    velocity_update: Literal["apic", "flip"] = "apic"
-    flip: Annotated[float, Field(ge=0, le=1)] | None = None  # "flip" only; FLIP_DEFAULT
+    # point velocity update: "apic" (affine PIC), "flip" (the FLIP/PIC blend of `flip`,
+    # whose PIC share dissipates once per step, so by an amount that depends on dt), or
+    # "aflip" (APIC's affine transfer with FLIP's increment, blended by `flip`)
+    velocity_update: Literal["apic", "flip", "aflip"] = "apic"
+    # "flip" and "aflip" only; default FLIP_DEFAULT ("flip") or 1.0 ("aflip")
+    flip: Annotated[float, Field(ge=0, le=1)] | None = None
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
     dt: Pos | None = None  # s; fixed step (checked against the CFL limit); default: CFL
     gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
@@ -55,13 +57,14 @@ class SolverCfg(StrictModel):
 
     @model_validator(mode="after")
     def _flip(self):
-        if self.velocity_update == "flip" and self.flip is None:
-            self.flip = FLIP_DEFAULT
+        if self.velocity_update != "apic" and self.flip is None:
+            self.flip = FLIP_DEFAULT if self.velocity_update == "flip" else 1.0
         elif self.velocity_update == "apic" and self.flip is not None:
             raise ValueError(
-                f"flip = {self.flip} applies to velocity_update = 'flip' only, and "
-                f"velocity_update = {self.velocity_update!r} (the default is 'apic'); add "
-                "velocity_update = \"flip\" to keep the FLIP/PIC blend, or remove `flip`")
+                f"flip = {self.flip} applies to velocity_update = 'flip' or 'aflip' only, "
+                f"and velocity_update = {self.velocity_update!r} (the default is 'apic'); "
+                "add velocity_update = \"flip\" to keep the FLIP/PIC blend, or remove "
+                "`flip`")
         return self
 
 

@@ -29,7 +29,7 @@ from grainscale.mpm.transfer import (
 )
 
 SCHEMES = ("USF", "USL", "MUSL")
-VELOCITY_UPDATES = ("apic", "flip")
+VELOCITY_UPDATES = ("apic", "flip", "aflip")
 _SOLVER = SolverCfg()  # the case file's defaults are the only ones
 _DAMPING = DampingCfg()
 MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry no velocity
@@ -57,8 +57,9 @@ class MPMState:
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m/s^2
     scheme: str = _SOLVER.scheme
     shape: str = _SOLVER.shape
-    velocity_update: str = _SOLVER.velocity_update  # "apic", or "flip": the FLIP/PIC blend
-    flip: float = FLIP_DEFAULT  # FLIP fraction of the "flip" velocity update (0 = PIC)
+    # "apic"; "flip": the FLIP/PIC blend; "aflip": APIC's affine transfer, FLIP's increment
+    velocity_update: str = _SOLVER.velocity_update
+    flip: float = FLIP_DEFAULT  # FLIP fraction of "flip" and "aflip" (0 = PIC / APIC)
     cfl: float = _SOLVER.cfl
     damping: float = _DAMPING.alpha  # local damping coefficient alpha
     damping_end: float = np.inf  # s, damping acts while time < damping_end
@@ -117,7 +118,7 @@ class MPMState:
 def shape_functions(s: MPMState) -> None:
     """S_Ip and grad S_Ip at the current point positions."""
     s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape, out=s.shape_buf)
-    if s.scheme == "MUSL" and s.velocity_update == "apic":
+    if s.scheme == "MUSL" and s.velocity_update != "flip":
         s.x_start = s.points.x.copy()  # the remap's affine term is taken where S_Ip was
 
 
@@ -159,7 +160,7 @@ def grid_velocity(s: MPMState) -> None:
     v[a] = s.momentum[a] / s.mass[a, None]
     # FLIP's increment is taken from the mapped velocity, before the boundaries act, so
     # the impulse of a wall or of the rigid body reaches the points too
-    s.v_mapped = v.copy() if s.velocity_update == "flip" else v
+    s.v_mapped = v.copy() if s.velocity_update != "apic" else v
     impose(s, v)
     if nodes_contact(s):
         # the material's velocity at the covered nodes before the body imposes its own:
@@ -268,11 +269,12 @@ def integrate_grid(s: MPMState, dt: float) -> None:
 
 
 def g2p(s: MPMState, dt: float) -> None:
-    """Point velocity (APIC or FLIP/PIC, seed Eq. 18) and position (seed Eq. 19)."""
+    """Point velocity (APIC, FLIP/PIC or AFLIP, seed Eq. 18) and position (seed Eq. 19)."""
     pts = s.points
     g = s.grid
-    g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, s.flip,
-               s.velocity_update == "apic", g.origin, g.upper, pts.x, pts.v, pts.C,
+    flip = 0.0 if s.velocity_update == "apic" else s.flip
+    g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
+               s.velocity_update != "flip", g.origin, g.upper, pts.x, pts.v, pts.C,
                s.chunk_vmax, s.chunk_out)
     n_out = int(s.chunk_out.sum())
     if g.periodic.any():
@@ -302,7 +304,7 @@ def g2p(s: MPMState, dt: float) -> None:
 def remap_velocity(s: MPMState) -> None:
     """MUSL: grid velocity re-mapped from the updated point momenta (same S_Ip)."""
     pts = s.points
-    x = s.x_start if s.velocity_update == "apic" else pts.x  # x unused when C = 0
+    x = s.x_start if s.velocity_update != "flip" else pts.x  # x unused when C = 0
     _, mom, _ = s.transfer.mass_momentum(pts.m, pts.v, pts.C, x, s.grid, s.base, s.w, s.ns)
     v = np.zeros_like(mom)
     a = s.active

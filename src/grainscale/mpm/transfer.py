@@ -266,15 +266,16 @@ def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x
                     c20 += n2 * dx
                     c21 += n2 * dy
                     c22 += n2 * dz
-                else:
+                if flip > 0.0:
                     ax += S * (n0 - vold[I, 0])
                     ay += S * (n1 - vold[I, 1])
                     az += S * (n2 - vold[I, 2])
     if apic:
-        v0, v1, v2 = ux, uy, uz
         C[p, 0, 0], C[p, 0, 1], C[p, 0, 2] = c00, c01, c02
         C[p, 1, 0], C[p, 1, 1], C[p, 1, 2] = c10, c11, c12
         C[p, 2, 0], C[p, 2, 1], C[p, 2, 2] = c20, c21, c22
+    if flip == 0.0:  # PIC, or APIC
+        v0, v1, v2 = ux, uy, uz
     else:
         v0 = flip * (v[p, 0] + ax) + (1.0 - flip) * ux
         v1 = flip * (v[p, 1] + ay) + (1.0 - flip) * uy
@@ -314,13 +315,14 @@ def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
                nout_out):
     """Point velocity (seed Eq. 18) and position (seed Eq. 19) update.
 
-    APIC (apic = True; Jiang et al. 2015, in the velocity-gradient form of Taylor PIC,
-    Nakamura et al. 2023, which is exactly APIC for linear shape functions):
+    APIC (apic = True, flip = 0; Jiang et al. 2015, in the velocity-gradient form of
+    Taylor PIC, Nakamura et al. 2023, which is exactly APIC for linear shape functions):
         v_p <- sum S v_new,   C_p <- sum v_new (x) grad S
     FLIP/PIC blend (apic = False; C_p is left untouched, zero):
         v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
     with v_old the mapped grid velocity before the boundaries acted, so that their
-    impulse reaches the points. Both: x_p <- x_p + dt sum S v_new.
+    impulse reaches the points. AFLIP (apic = True, flip > 0): the blend for v_p and
+    APIC's C_p (P2G then maps the affine field). All: x_p <- x_p + dt sum S v_new.
     Per chunk: the largest point speed (for the CFL check) and the number of points
     whose centre left the grid box [lo, hi].
     """
