@@ -47,6 +47,28 @@ def time_steps(batch: RVEBatch, cp: engine.ContactParams, ctrl: engine.Control, 
     return best
 
 
+def decorrelated_batch(base: RVEBatch, count: int, rng: np.random.Generator) -> RVEBatch:
+    """`count` copies of base with velocities perturbed by 1e-4 m/s, so they decorrelate."""
+    copies = []
+    for _ in range(count):
+        c = base.copy()
+        c.v += rng.normal(0.0, 1e-4, c.v.shape)
+        copies.append(c)
+    return concatenate(copies)
+
+
+def thread_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: int,
+                 cores: int) -> tuple[float, float]:
+    """Best wall times [s] of `steps` sheared steps of a batch on 1 and on `cores` threads
+    (after 10 steps that compile and build the lists)."""
+    ctrl = shear_control(batch)
+    engine.advance(batch, 10, dt, cp, ctrl)
+    numba.set_num_threads(1)
+    t1 = time_steps(batch, cp, ctrl, dt, steps, repeats=2)
+    numba.set_num_threads(cores)
+    return t1, time_steps(batch, cp, ctrl, dt, steps, repeats=2)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
@@ -95,20 +117,10 @@ def main() -> None:
 
     # batch of RVEs: copies with different velocities so they decorrelate
     rng = np.random.default_rng(0)
-    copies = []
-    for _ in range(args.batch):
-        c = base.copy()
-        c.v += rng.normal(0.0, 1e-4, c.v.shape)
-        copies.append(c)
-    batch = concatenate(copies)
-    ctrl = shear_control(batch)
-    engine.advance(batch, 10, dt, cp, ctrl)
+    batch = decorrelated_batch(base, args.batch, rng)
     bsteps = max(steps // 4, 500)
-    numba.set_num_threads(1)
-    t1 = time_steps(batch, cp, ctrl, dt, bsteps, repeats=2)
     cores = numba.config.NUMBA_NUM_THREADS
-    numba.set_num_threads(cores)
-    tp = time_steps(batch, cp, ctrl, dt, bsteps, repeats=2)
+    t1, tp = thread_times(batch, cp, dt, bsteps, cores)
     eff = t1 / (cores * tp)
     ps1 = args.batch * n * bsteps / t1
     psp = args.batch * n * bsteps / tp
@@ -124,19 +136,9 @@ def main() -> None:
 
     # a large batch (the MPM's use): core-ns per particle-step on one thread, and the
     # parallel efficiency of the same batch on all threads
-    bigs = []
-    for _ in range(args.big_batch):
-        c = base.copy()
-        c.v += rng.normal(0.0, 1e-4, c.v.shape)
-        bigs.append(c)
-    big = concatenate(bigs)
-    ctrl = shear_control(big)
-    engine.advance(big, 10, dt, cp, ctrl)
+    big = decorrelated_batch(base, args.big_batch, rng)
     gsteps = 40 if args.quick else max(steps // 50, 100)
-    numba.set_num_threads(1)
-    g1 = time_steps(big, cp, ctrl, dt, gsteps, repeats=2)
-    numba.set_num_threads(cores)
-    gp = time_steps(big, cp, ctrl, dt, gsteps, repeats=2)
+    g1, gp = thread_times(big, cp, dt, gsteps, cores)
     ns_batch = g1 / (args.big_batch * n * gsteps) * 1e9
     eff_batch = g1 / (cores * gp)
     print(f"\nbatch of {args.big_batch} RVEs x {n} spheres, {gsteps} steps: "
