@@ -45,11 +45,11 @@ def degrees(x) -> float:
 
 
 def frames(out: Path) -> None:
-    import meshio
+    from grainscale.io.vtk import read_points_vtu
 
     print("frame  flowing: n  phi_mob quartiles [deg]   resting: n  phi_mob quartiles")
     for f in sorted(glob.glob(str(out / "frames" / "frame_*.vtu"))):
-        d = meshio.read(f).point_data
+        _, d = read_points_vtu(f)
         phi = mobilised(d["stress"].reshape(-1, 3, 3))
         v = np.linalg.norm(d["velocity"], axis=1)
         row = [Path(f).stem[-5:]]

@@ -23,10 +23,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import meshio  # noqa: E402
 import numpy as np  # noqa: E402
 
 from grainscale.io.history import read_history  # noqa: E402
+from grainscale.io.vtk import read_points_vtu  # noqa: E402
 
 
 def frames(out: Path) -> list[tuple[float, Path]]:
@@ -59,9 +59,8 @@ def main() -> None:
     vmax = 0.0
     data = []
     for *_, f in chosen:
-        m = meshio.read(f)
-        x = m.points
-        rate = np.asarray(m.point_data["rotation_rate"]).ravel()
+        x, fields = read_points_vtu(f)
+        rate = np.asarray(fields["rotation_rate"]).ravel()
         near = x[:, 1] < spacing
         data.append((x[near], rate[near]))
         vmax = max(vmax, float(np.nanpercentile(rate[near], 98)))
