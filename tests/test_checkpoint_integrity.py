@@ -92,6 +92,28 @@ def test_every_array_and_attribute_is_checked(tmp_path):
         read_checkpoint(path)
 
 
+def test_large_arrays_are_stored_compressed_and_still_checked(tmp_path):
+    """An RVE neighbour table is mostly zero padding: above COMPRESS_BYTES an array is
+    stored gzip-compressed (here 8 MB of it in well under 1 MB), reads back exactly, and
+    a damaged compressed chunk is still reported as a corrupt checkpoint."""
+    path = tmp_path / "c.h5"
+    ft = np.zeros((200, 150, 12, 3))
+    ft[:, :, :2] = np.random.default_rng(0).normal(size=(200, 150, 2, 3))
+    write_checkpoint(path, {"material_0": {"rve_ft": ft}}, {"step": 1})
+    assert path.stat().st_size < ft.nbytes / 4
+    g, _ = read_checkpoint(path)
+    assert np.array_equal(g["material_0"]["rve_ft"], ft)
+    with h5py.File(path, "r") as f:
+        chunk = f["material_0/rve_ft"].id.get_chunk_info(0)
+    with open(path, "r+b") as fh:
+        fh.seek(chunk.byte_offset + chunk.size // 2)
+        b = fh.read(1)[0]
+        fh.seek(chunk.byte_offset + chunk.size // 2)
+        fh.write(bytes([b ^ 0xFF]))
+    with pytest.raises(CorruptCheckpoint, match="material_0/rve_ft|unreadable"):
+        read_checkpoint(path)
+
+
 @pytest.mark.parametrize("damage", ["part byte", "part truncated", "manifest byte",
                                     "manifest truncated", "manifest missing"])
 def test_damaged_newest_checkpoint_falls_back_to_the_previous(damage, reference, stopped,

@@ -33,6 +33,7 @@ from grainscale.dem.state import (
     RVEBatch,
     concatenate,
     from_state_arrays,
+    grow_capacity,
     padded,
     state_arrays,
     unpadded,
@@ -247,24 +248,30 @@ class RVEMaterial:
         return speed
 
     def state(self) -> dict[str, np.ndarray]:
-        """Per point: the RVE's full state, padded to the largest sphere count and list
-        capacity here (`rve_particles` holds each RVE's own count), and the material's
-        per-point arrays."""
+        """Per point: the RVE's full state, padded to the largest sphere count here and
+        to the longest neighbour row in use (`rve_particles` holds each RVE's own sphere
+        count, `rve_capacity` its list capacity, restored on loading), and the
+        material's per-point arrays."""
+        capacity = np.zeros(self.n_points, np.int64)
         if self.groups:
             n = max(b.n_particles for b in self.groups)
-            k = max(b.capacity for b in self.groups)
+            # the capacity only grows (retiling, overflows): tables cut to the rows'
+            # longest count are several times smaller
+            k = max(max(int(b.nbr_count.max(initial=0)) for b in self.groups), 1)
             arrays = {}
             for b, rows in zip(self.groups, self.rows, strict=True):
                 for name, v in padded(state_arrays(b), n, k).items():
                     if name not in arrays:
                         arrays[name] = np.empty((self.n_points, *v.shape[1:]), v.dtype)
                     arrays[name][rows] = v
+                capacity[rows] = b.capacity
             counts = self.particle_counts()
         else:
             arrays = state_arrays(self._none)
             counts = np.zeros(0, np.int64)
         out = {f"rve_{k}": v for k, v in arrays.items()}
         out["rve_particles"] = counts
+        out["rve_capacity"] = capacity
         out["theta_prev"] = self.theta_prev
         out["spin_rate"] = self.spin_rate
         out["assignment"] = self.assignment
@@ -276,10 +283,13 @@ class RVEMaterial:
         counts = _counts(state)
         self.n_points = len(counts)
         self.groups, self.rows = [], []
+        capacity = state.get("rve_capacity")  # absent in checkpoints before it
         for n in np.unique(counts):
             rows = np.flatnonzero(counts == n)
-            self.groups.append(from_state_arrays(unpadded(
-                {k: v[rows] for k, v in arrays.items()}, int(n))))
+            b = from_state_arrays(unpadded({k: v[rows] for k, v in arrays.items()}, int(n)))
+            if capacity is not None:  # the same capacity as saved: the run continues bitwise
+                grow_capacity(b, int(np.max(capacity[rows])))
+            self.groups.append(b)
             self.rows.append(rows)
         self.theta_prev = np.asarray(state["theta_prev"], float).copy()
         self.assignment = np.asarray(state["assignment"]).copy()
@@ -314,7 +324,7 @@ class RVEMaterial:
                         for p in parts]
         out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in STATE_FIELDS}
         out["rve_particles"] = np.concatenate([_counts(p) for p in parts])
-        for key in ("theta_prev", "spin_rate", "assignment", "work"):
+        for key in ("theta_prev", "spin_rate", "assignment", "work", "rve_capacity"):
             if all(key in p for p in parts):
                 out[key] = np.concatenate([p[key] for p in parts])
         return out

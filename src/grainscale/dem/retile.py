@@ -46,7 +46,7 @@ def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
     step matches these entries by partner and image, so every contact keeps its history.
     """
     n = b.n_particles
-    out = allocate(1, m * n, m * b.capacity)
+    out = allocate(1, m * n, b.capacity)  # grown below if a row gets longer
     scale = np.ones(3)
     scale[k] = m
     out.h[0] = b.h[r] * scale[None, :]

@@ -163,11 +163,15 @@ SLOT_FIELDS = ("nbr_j", "nbr_shift", "ft")
 
 
 def padded(arrays: dict[str, np.ndarray], n: int, k: int) -> dict[str, np.ndarray]:
-    """`state_arrays` of RVEs with up to n spheres and k neighbour slots, zero-padded to
-    exactly n and k, so RVEs of different sizes fit in one table (checkpoints). The
-    padding is inert: empty neighbour rows, spheres of zero radius, cut off on reading."""
+    """`state_arrays` of RVEs with up to n spheres, zero-padded to exactly n spheres and
+    k neighbour slots, so RVEs of different sizes fit in one table (checkpoints). The
+    padding is inert: empty neighbour rows, spheres of zero radius, cut off on reading.
+    Slots beyond k are dropped: k must be at least every row's nbr_count (the slots
+    past a row's count hold nothing)."""
     out = {}
     for name, v in arrays.items():
+        if name in SLOT_FIELDS and v.shape[2] > k:
+            v = v[:, :, :k]
         shape = list(v.shape)
         if name in SPHERE_FIELDS:
             shape[1] = n

@@ -8,6 +8,10 @@ one whose HDF5 structure is damaged, fails to open or to read in h5py. Every suc
 problem, and a file without checksums, is raised as CorruptCheckpoint naming the file
 and the array.
 
+Arrays above COMPRESS_BYTES are stored gzip-compressed (level 1, byte shuffle): the
+RVEs' neighbour tables are mostly padding, and a multiscale checkpoint shrinks by an
+order of magnitude for a few seconds of compression (docs/architecture.md: checkpoints).
+
 Written to `<name>.tmp.h5`, flushed and fsync'ed, then renamed onto the final name and
 the folder fsync'ed, so an interrupted write never destroys the previous file.
 """
@@ -25,6 +29,7 @@ import numpy as np
 from grainscale.io import faults
 
 ATTRS_DIGEST = "attrs_sha256"
+COMPRESS_BYTES = 1 << 20  # arrays larger than this are compressed
 
 
 class CorruptCheckpoint(Exception):
@@ -72,7 +77,9 @@ def write_checkpoint(path: str | Path, groups: dict[str, dict[str, np.ndarray]],
             grp = f.create_group(g)
             for k, a in arrays.items():
                 a = np.asarray(a)
-                grp.create_dataset(k, data=a).attrs["sha256"] = array_digest(a)
+                opts = (dict(compression="gzip", compression_opts=1, shuffle=True)
+                        if a.nbytes > COMPRESS_BYTES else {})
+                grp.create_dataset(k, data=a, **opts).attrs["sha256"] = array_digest(a)
             if faults.ARMED and i == 0:  # a temporary file cut short (tests)
                 f.flush()
                 faults.point(f"{fault}.mid_write")
