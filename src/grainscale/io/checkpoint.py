@@ -10,7 +10,7 @@ and the array.
 
 Arrays above COMPRESS_BYTES are stored gzip-compressed (level 1, byte shuffle): the
 RVEs' neighbour tables are mostly padding, and a multiscale checkpoint shrinks by an
-order of magnitude for a few seconds of compression (docs/architecture.md: checkpoints).
+order of magnitude for a few seconds of compression (docs/case-files.md: checkpoints).
 
 Written to `<name>.tmp.h5`, flushed and fsync'ed, then renamed onto the final name and
 the folder fsync'ed, so an interrupted write never destroys the previous file.
