@@ -3,12 +3,20 @@ shear (one thread), Verlet-skin variants as ratios, and the parallel efficiency 
 of RVEs on all cores.
 
     python benchmarks/dem_throughput.py [--steps 20000] [--batch 8] [--big-batch 64] [--quick]
+    python benchmarks/dem_throughput.py --device cuda [--rves 10000] [--gpu-steps 100]
 
 Prints a table; the last line is one JSON object with at least `ns_per_particle_step`
 (single thread, shear), `parallel_efficiency` and `ns_per_particle_step_batch`: core-ns
 per particle-step of a batch of `--big-batch` RVEs (default 64) of 800 spheres in shear
 on one thread, with the batch's parallel efficiency on all threads
 (`parallel_efficiency_batch`).
+
+`--device cuda` times the GPU kernel (dem/cuda_kernel.py) instead: a batch of `--rves`
+RVEs of 800 spheres (decorrelated copies) in the same shear, `--gpu-steps` steps per
+`engine.advance` call (one call is one MPM step: the state goes to the device and back
+once), best of 2. Its JSON line holds `ns_per_particle_step_cuda` (wall time of a call,
+transfers included, per particle-step) and `transfer_s` (a call of zero steps: the
+copies alone). Needs a GPU; the CPU figures are not taken in that mode.
 """
 
 from __future__ import annotations
@@ -69,6 +77,54 @@ def thread_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: in
     return t1, time_steps(batch, cp, ctrl, dt, steps, repeats=2)
 
 
+def cuda_throughput(base: RVEBatch, cp: engine.ContactParams, dt: float, rves: int,
+                    steps: int, threads: int) -> None:
+    """Print the GPU kernel's ns per particle-step for `rves` copies of base in shear."""
+    from numba import cuda
+
+    from grainscale.dem import cuda_kernel
+
+    engine.check_device("cuda")
+    cuda_kernel.THREADS = threads  # the block size of engine.advance(device="cuda")
+    n = base.n_particles
+    print(f"building a batch of {rves} RVEs x {n} spheres ...")
+    batch = decorrelated_batch(base, rves, np.random.default_rng(0))
+    ctrl = shear_control(batch)
+    engine.advance(batch, 10, dt, cp, ctrl, device="cuda")  # compile, build lists
+    best = np.inf
+    for _ in range(2):
+        b = batch.copy()
+        t0 = time.perf_counter()
+        engine.advance(b, steps, dt, cp, ctrl, device="cuda")
+        best = min(best, time.perf_counter() - t0)
+    # the copies alone: a call of zero steps (no RVE moves)
+    status = np.zeros(rves, np.int64)
+    out = np.zeros((rves, 5))
+    law = engine.contact_law(cp)
+    ctl = engine.Controls(float(dt), np.broadcast_to(np.eye(3), (rves, 3, 3)).copy(),
+                          np.zeros((rves, 3, 3)), ctrl.hdot_fixed, ctrl.l_ctrl,
+                          ctrl.servo_mask, ctrl.servo_target, float(ctrl.servo_gain),
+                          ctrl.max_rate)
+    t0 = time.perf_counter()
+    cuda_kernel.advance_batch(np.zeros(rves, np.int64), law, engine.rve_arrays(batch), ctl,
+                              status, out)
+    transfer = time.perf_counter() - t0
+    ns = best / (rves * n * steps) * 1e9
+    try:
+        name = cuda.get_current_device().name
+        name = name.decode() if isinstance(name, bytes) else str(name)
+    except AttributeError:  # numba's simulator has no device
+        name = "simulator"
+    print(f"\nCUDA ({name}), {rves} RVEs x {n} spheres, triaxial shear, {steps} steps per "
+          f"call, {threads} threads per RVE, best of 2: {ns:.2f} ns/particle-step "
+          f"(transfers included; a call of zero steps: {transfer:.3f} s)")
+    print(json.dumps({
+        "device": "cuda", "gpu": name, "ns_per_particle_step_cuda": round(ns, 3),
+        "rves": rves, "particles": n, "steps_per_call": steps, "threads_per_block": threads,
+        "transfer_s": round(transfer, 4), "capacity": batch.capacity,
+    }))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
@@ -76,7 +132,16 @@ def main() -> None:
     ap.add_argument("--big-batch", type=int, default=64,
                     help="RVEs in the batch of ns_per_particle_step_batch")
     ap.add_argument("--quick", action="store_true", help="fewer steps (smoke test)")
+    ap.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                    help="cuda: time the GPU kernel on --rves RVEs instead (needs a GPU)")
+    ap.add_argument("--rves", type=int, default=10000, help="RVEs of the --device cuda batch")
+    ap.add_argument("--gpu-steps", type=int, default=100,
+                    help="DEM steps per engine.advance call with --device cuda")
+    ap.add_argument("--gpu-threads", type=int, default=128,
+                    help="threads per RVE (block size) with --device cuda")
     args = ap.parse_args()
+    if args.device == "cuda":
+        engine.check_device("cuda")  # before the minutes of generation
     steps = 2000 if args.quick else args.steps
     params = RVEParams(preparation={"pressure": 100e3, "porosity": 0.373})
     print("generating the unit-element RVE (800 spheres, n = 0.373, p = 100 kPa) ...")
@@ -86,6 +151,9 @@ def main() -> None:
     # move into the shear regime first (2 % axial strain) so contacts slide and lists churn
     engine.advance(base, int(0.02 / (0.1 * dt) / 10), dt, cp, shear_control(base, 1.0))
     n = base.n_particles
+    if args.device == "cuda":
+        cuda_throughput(base, cp, dt, args.rves, args.gpu_steps, args.gpu_threads)
+        return
 
     numba.set_num_threads(1)
     rows = []

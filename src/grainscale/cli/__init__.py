@@ -57,6 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "without it; output.history never: docs/case-files.md)")
     run.add_argument("--threads", type=_positive_int, default=None,
                      help="numba threads per process (overrides solver.threads)")
+    run.add_argument("--device", choices=("cpu", "cuda"), default=None,
+                     help="where the DEM RVEs of 'dem' materials are stepped (overrides "
+                          "solver.device): cpu, or cuda (one NVIDIA GPU per process; needs "
+                          "the `cuda` extra)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     rve = sub.add_parser("rve", help="pure DEM work on one periodic RVE")
@@ -133,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
                             steps_this_run=args.steps_this_run,
                             checkpoint_every=args.checkpoint_every, resume=args.resume,
                             allow_changed=args.allow_changed,
-                            progress=not args.quiet, threads=args.threads, comm=comm)
+                            progress=not args.quiet, threads=args.threads,
+                            device=args.device, comm=comm)
         if args.command == "rve":
             from grainscale.cli import rve
 

@@ -54,6 +54,9 @@ class SolverCfg(StrictModel):
     threads: Annotated[int, Field(ge=0)] = 0  # per rank; 0: the cores / ranks per node
     partition_seed: Annotated[int, Field(ge=0)] = 0  # random point-to-rank assignment (MPI)
     rebalance_every: Annotated[int, Field(ge=0)] = 0  # steps between cost rebalancing; 0: never
+    # where the DEM RVEs of "dem" materials are stepped: "cpu" (numba threads) or "cuda"
+    # (one NVIDIA GPU per process, dem/cuda_kernel.py; agrees with "cpu" at round-off)
+    device: Literal["cpu", "cuda"] = "cpu"
 
     @model_validator(mode="after")
     def _flip(self):

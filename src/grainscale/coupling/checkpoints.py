@@ -55,7 +55,7 @@ PARTS = "checkpoint.parts"
 # not change the physics of the steps already taken or to come. time.end: extending
 # or shortening a run is the normal use; the rest are performance, element tests
 # (`grainscale rve`, not this run) or outputs that do not touch history.csv.
-FREE = ("title", "time.end", "solver.threads", "solver.partition_seed",
+FREE = ("title", "time.end", "solver.threads", "solver.device", "solver.partition_seed",
         "solver.rebalance_every", "output.frames", "output.frame_interval",
         "output.checkpoint_every", "output.probes", "triaxial", "undrained", "isotropic",
         "shear")

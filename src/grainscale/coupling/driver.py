@@ -40,6 +40,7 @@ from grainscale.coupling.outputs import gather, history_values, point_fields
 from grainscale.coupling.probes import Probe, ProbeWriter, resolve
 from grainscale.coupling.rebalance import rebalance
 from grainscale.coupling.rve_material import RVEMaterial
+from grainscale.dem.engine import check_device
 from grainscale.distributed.comm import Comm, world
 from grainscale.io import faults
 from grainscale.io.history import History
@@ -149,7 +150,7 @@ def run_case(case_path, out, *, max_steps: int | None = None,
              checkpoint_every: int | None = None, resume: bool = False,
              allow_changed: list[str] | None = None,
              progress: bool = True, threads: int | None = None,
-             comm: Comm | None = None) -> int:
+             device: str | None = None, comm: Comm | None = None) -> int:
     """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error).
 
     max_steps ends the run at that step of the whole run (counted from time.start, as
@@ -157,14 +158,19 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     `resume` after any stop ends at the same step; steps_this_run caps the steps taken
     by this call alone (a per-job budget). `resume` continues from the newest valid
     checkpoint in `out` if its case matches, but for the keys named in allow_changed.
+    `device` ("cpu" or "cuda") overrides solver.device, where the DEM RVEs are stepped;
+    "cuda" without a usable GPU is a ConfigError (engine.DeviceError) before any work.
     Input errors are raised as ConfigError, on every rank alike (the checks after the
     ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
     case_path = Path(case_path)
     out = Path(out)
     case = load_case(case_path)
+    if device is not None:  # --device: recorded as the case's solver.device
+        case.solver.device = device
     record = checkpoints.case_record(case)  # before the run fills in values
     set_threads(case, threads, comm)
+    check_device(case.solver.device)
     every = checkpoint_every if checkpoint_every is not None else case.output.checkpoint_every
     if allow_changed and not resume:
         raise ConfigError(f"--allow-changed {' '.join(allow_changed)}: applies only with "

@@ -92,7 +92,8 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
                            min_substeps=cfg.min_substeps,
                            strain_per_substep=cfg.strain_per_substep,
                            retile_width=cfg.retile_width,
-                           retile_max_factor=cfg.retile_max_factor)
+                           retile_max_factor=cfg.retile_max_factor,
+                           device=case.solver.device)
 
     return factory
 

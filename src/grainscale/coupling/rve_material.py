@@ -74,15 +74,18 @@ class RVEMaterial:
                  mode: str = _DEM.time_integration, min_substeps: int = _DEM.min_substeps,
                  strain_per_substep: float = _DEM.strain_per_substep,
                  local: np.ndarray | None = None, retile_width: float = _DEM.retile_width,
-                 retile_max_factor: int = _DEM.retile_max_factor):
+                 retile_max_factor: int = _DEM.retile_max_factor, device: str = "cpu"):
         """n_points: points of this material over all ranks; local: the indices (into
         them) of the points this process holds (default: all). The packing of each point
         is drawn for all points with the seed, so it does not depend on the ranks.
         retile_width: cells narrower than this many mean grain diameters are doubled
         (0: never), up to retile_max_factor times the packing's spheres. The defaults
-        are those of a case file's "dem" material (config.case.DEMMaterialCfg)."""
+        are those of a case file's "dem" material (config.case.DEMMaterialCfg).
+        device: where `update` steps the RVEs, "cpu" or "cuda" (solver.device)."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
+        engine.check_device(device)
+        self.device = device
         self.name = name
         self.params = params
         self.mode = mode
@@ -183,7 +186,7 @@ class RVEMaterial:
                 dt_dem = self.dt_crit
             try:
                 ctrl = engine.increment_control(batch, dH[rows], nsteps, dt_dem)
-                engine.advance(batch, nsteps, dt_dem, self.cp, ctrl)
+                engine.advance(batch, nsteps, dt_dem, self.cp, ctrl, device=self.device)
             except engine.RVEError as err:
                 point = int(rows[err.rve])
                 point = point if self.local is None else int(self.local[point])

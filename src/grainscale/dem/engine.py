@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from grainscale.config.base import ConfigError
 from grainscale.config.rve import Numerics
 from grainscale.dem.kernel import (
     ContactLaw,
@@ -165,9 +166,47 @@ def critical_dt(batch: RVEBatch, params: ContactParams,
     return safety * float(np.sqrt(batch.mass.min() / (params.young * batch.radius.max())))
 
 
+DEVICES = ("cpu", "cuda")  # the values of `device` (case file: solver.device)
+
+
+class DeviceError(ConfigError):
+    """The DEM device asked for (solver.device, --device) is unknown or not available."""
+
+
+def check_device(device: str) -> None:
+    """Raise DeviceError unless `device` is one of DEVICES and can run here."""
+    if device not in DEVICES:
+        raise DeviceError(f"solver.device = {device!r}: unknown; valid values: "
+                          f"{', '.join(map(repr, DEVICES))}")
+    if device == "cuda":
+        try:
+            from grainscale.dem import cuda_kernel
+        except ImportError as err:
+            raise DeviceError(f"solver.device = 'cuda': numba.cuda cannot be imported "
+                              f"({err}); valid values: 'cpu', or 'cuda' with an NVIDIA GPU "
+                              "and the `cuda` extra (pip install grainscale[cuda])") from None
+        if not cuda_kernel.is_available():
+            raise DeviceError("solver.device = 'cuda': no usable CUDA GPU here "
+                              "(numba.cuda.is_available() is False); valid values: 'cpu', "
+                              "or 'cuda' on a machine with an NVIDIA GPU, its driver and "
+                              "the `cuda` extra (pip install grainscale[cuda])")
+
+
 def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
-            control: Control) -> RVEBatch:
-    """Advance every RVE by nsteps (int or (R,) array) steps of dt, in place."""
+            control: Control, device: str = "cpu") -> RVEBatch:
+    """Advance every RVE by nsteps (int or (R,) array) steps of dt, in place.
+
+    device "cpu" runs kernel.advance_batch (numba threads over RVEs), "cuda"
+    cuda_kernel.advance_batch (one GPU block per RVE; the state goes to the device and
+    back once per pass of the loop below, i.e. once per call unless a list overflows):
+    the same physics, agreeing at round-off (cuda_kernel's docstring)."""
+    if device == "cpu":
+        step_batch = advance_batch
+    else:
+        check_device(device)
+        from grainscale.dem import cuda_kernel
+
+        step_batch = cuda_kernel.advance_batch
     remaining = np.broadcast_to(np.asarray(nsteps, np.int64), (batch.n_rve,)).copy()
     status = np.zeros(batch.n_rve, np.int64)
     out = np.zeros((batch.n_rve, 5))
@@ -182,7 +221,7 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
                    max_rate)
     while remaining.max() > 0:
         # the state is read afresh each pass: a capacity regrowth replaces its arrays
-        advance_batch(remaining, law, rve_arrays(batch), ctl, status, out)
+        step_batch(remaining, law, rve_arrays(batch), ctl, status, out)
         done = out[:, 4].astype(np.int64)
         remaining -= done
         moved = done > 0  # an RVE that took no step in this call keeps its outputs

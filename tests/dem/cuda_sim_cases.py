@@ -1,0 +1,145 @@
+"""Scenarios of the CUDA DEM kernel against the CPU path, run by test_cuda_kernel.py.
+
+Run as a script in a subprocess whose environment has NUMBA_ENABLE_CUDASIM=1 (numba's
+CUDA simulator: it must be set before numba is imported, and must not reach the other
+tests' process). Prints one JSON object of measured differences on its last line; the
+test module asserts on them. Kept tiny: the simulator runs every GPU thread as a Python
+thread.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from dem_helpers import agitated_dense_state  # noqa: E402
+
+from grainscale.dem import cuda_kernel, engine  # noqa: E402
+from grainscale.dem.state import RVEBatch, concatenate  # noqa: E402
+
+THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
+
+
+def block_size(threads: int) -> None:
+    """Make engine.advance(device="cuda") run blocks of `threads` threads."""
+    cuda_kernel.THREADS = threads
+
+
+def rel(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b| / max |a| (0 for two zero arrays)."""
+    scale = float(np.abs(a).max())
+    return float(np.abs(a - b).max()) / scale if scale > 0 else float(np.abs(b).max())
+
+
+def rows(b: RVEBatch) -> list[dict]:
+    """Per RVE and particle, {(j, image code): ft}: a list's content, whatever its order
+    (a device build orders rows by j, the CPU's cell list otherwise)."""
+    out = []
+    for r in range(b.n_rve):
+        for i in range(b.n_particles):
+            out.append({(int(b.nbr_j[r, i, k]), int(b.nbr_shift[r, i, k])): b.ft[r, i, k]
+                        for k in range(b.nbr_count[r, i])})
+    return out
+
+
+def ft_diff(cpu: RVEBatch, gpu: RVEBatch) -> tuple[bool, float]:
+    """(the lists hold the same pairs, max |ft difference| / max |ft|) over matched pairs."""
+    a, b = rows(cpu), rows(gpu)
+    same = all(x.keys() == y.keys() for x, y in zip(a, b, strict=True))
+    scale = float(np.abs(cpu.ft).max())
+    worst = 0.0
+    for x, y in zip(a, b, strict=True):
+        for key in x.keys() & y.keys():
+            worst = max(worst, float(np.abs(x[key] - y[key]).max()))
+    return same, worst / scale
+
+
+def compare(cpu: RVEBatch, gpu: RVEBatch) -> dict:
+    same_pairs, ft_rel = ft_diff(cpu, gpu)
+    out = {name: rel(getattr(cpu, name), getattr(gpu, name))
+           for name in ("s", "v", "w", "rot", "stress", "stress_servo", "stiffness", "force",
+                        "torque", "h", "L", "unbalanced", "kinetic")}
+    out.update(ft=ft_rel, same_pairs=same_pairs,
+               same_counts=bool(np.array_equal(cpu.ncontact, gpu.ncontact)
+                                and np.array_equal(cpu.step_count, gpu.step_count)
+                                and np.array_equal(cpu.nbr_count, gpu.nbr_count)
+                                and np.array_equal(cpu.need_rebuild, gpu.need_rebuild)),
+               capacity=[cpu.capacity, gpu.capacity])
+    return out
+
+
+def main() -> None:
+    t0 = time.perf_counter()
+    block_size(THREADS)
+    a, p, dt = agitated_dense_state(n=24, seed=3)
+    b, _, _ = agitated_dense_state(n=24, seed=5)
+    base = concatenate([a, b])
+    res: dict = {"available": cuda_kernel.is_available()}
+
+    # 1. shear with a normal-stress servo through list rebuilds, per-RVE step counts
+    ctrl = engine.rate_control(2, l_ctrl=[[0.0, 400.0, 0.0], [0.0, 0.0, 0.0],
+                                          [0.0, 0.0, -20.0]], servo={0: -50e3},
+                               max_rate=50.0)
+    nsteps = np.array([30, 40])
+    cpu, gpu, again = base.copy(), base.copy(), base.copy()
+    engine.advance(cpu, nsteps, dt, p, ctrl)
+    engine.advance(gpu, nsteps, dt, p, ctrl, device="cuda")
+    engine.advance(again, nsteps, dt, p, ctrl, device="cuda")
+    res["shear"] = compare(cpu, gpu)
+    res["shear"]["rebuilt"] = [bool(not np.array_equal(base.h_ref[r], gpu.h_ref[r]))
+                               for r in range(2)]
+    res["shear"]["rebuilt_cpu"] = [bool(not np.array_equal(base.h_ref[r], cpu.h_ref[r]))
+                                   for r in range(2)]
+    res["shear"]["bitwise_rerun"] = all(
+        np.array_equal(getattr(gpu, f), getattr(again, f))
+        for f in ("s", "v", "w", "ft", "stress", "force", "torque", "nbr_j", "unbalanced"))
+
+    # 2. a list capacity too small for the next build: engine.advance regrows, retries
+    small = base.copy()
+    k = 3
+    small.nbr_j = np.ascontiguousarray(small.nbr_j[:, :, :k])
+    small.nbr_shift = np.ascontiguousarray(small.nbr_shift[:, :, :k])
+    small.ft = np.ascontiguousarray(small.ft[:, :, :k])
+    small.nbr_count = np.minimum(small.nbr_count, k).astype(np.int32)
+    small.need_rebuild[:] = 1
+    cpu, gpu = small.copy(), small.copy()
+    still = engine.rate_control(2)
+    engine.advance(cpu, 10, dt, p, still)
+    engine.advance(gpu, 10, dt, p, still, device="cuda")
+    res["overflow"] = compare(cpu, gpu)
+
+    # 3. momentum in a fixed periodic cell without damping: contact forces are pairwise
+    # opposite, so sum m v stays at its initial value up to round-off
+    gpu = base.copy()
+    p0 = np.einsum("rn,rnk->rk", gpu.mass, gpu.v)
+    engine.advance(gpu, 30, dt, p, still, device="cuda")
+    p1 = np.einsum("rn,rnk->rk", gpu.mass, gpu.v)
+    scale = np.einsum("rn,rnk->r", gpu.mass, np.abs(gpu.v)).max()
+    res["momentum_rel"] = float(np.abs(p1 - p0).max() / scale)
+    res["force_sum_rel"] = float(np.abs(gpu.force.sum(axis=1)).max()
+                                 / np.abs(gpu.force).max())
+
+    # 4. damping and a normal dashpot (restitution 0.7), one RVE taking no step, a block
+    # larger than the RVE (idle threads)
+    pd = engine.ContactParams(p.young, p.stiffness_ratio, p.friction, 0.1, p.skin,
+                              restitution=0.7)
+    cpu, gpu = base.copy(), base.copy()
+    engine.advance(cpu, [0, 15], dt, pd, ctrl)
+    block_size(32)
+    engine.advance(gpu, [0, 15], dt, pd, ctrl, device="cuda")
+    block_size(THREADS)
+    res["damped"] = compare(cpu, gpu)
+    res["damped"]["untouched"] = all(
+        np.array_equal(getattr(base, f)[0], getattr(gpu, f)[0])
+        for f in ("s", "v", "w", "ft", "stress", "step_count", "ncontact", "kinetic"))
+    res["seconds"] = time.perf_counter() - t0
+    print(json.dumps(res))
+
+
+if __name__ == "__main__":
+    main()
