@@ -108,6 +108,31 @@ def test_restitution_of_a_binary_impact(e):
     assert abs(b.mass[0] @ b.v[0, :, 0]) < 1e-12 * m1 * v0  # momentum kept
 
 
+def test_unbalanced_ratio_of_a_damped_pair_stays_one():
+    """The unbalanced-force ratio is mean |net force| / mean |contact normal force|. A
+    lone pair in head-on contact carries no other force, so it is exactly 1 throughout
+    the contact, also while a strong dashpot (e = 0.3) pulls the parting spheres
+    together (f_n < 0 there: signed, the ratio would read -1)."""
+    r1, r2 = 1.0e-3, 1.5e-3
+    b = two_spheres([3e-3, 5e-3, 5e-3], [3e-3 + r1 + r2 + 2e-6, 5e-3, 5e-3], r1, r2)
+    m1, m2 = b.mass[0]
+    b.v[0, 0, 0] = 0.01
+    b.v[0, 1, 0] = -0.01 * m1 / m2
+    p = engine.ContactParams(young=YOUNG, stiffness_ratio=0.5, friction=0.5, damping=0.0,
+                             skin=0.2e-3, restitution=0.3)
+    dt = engine.critical_dt(b, p, 0.01)
+    ctrl = engine.rate_control(1)
+    ratios = []
+    for _ in range(8000):
+        engine.advance(b, 1, dt, p, ctrl)
+        if b.ncontact[0] == 1:
+            ratios.append(b.unbalanced[0])
+        elif ratios:
+            break
+    assert len(ratios) > 100
+    assert np.allclose(ratios, 1.0, rtol=1e-9, atol=0.0)
+
+
 def test_stick_then_slip_at_coulomb_limit():
     """Fixed overlap, tangential sliding imposed by spinning both spheres (centres held):
     |ft| = kt u_t while kt u_t < mu fn, then exactly mu fn; reversing the sliding unloads

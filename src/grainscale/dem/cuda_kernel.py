@@ -448,7 +448,7 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
             ent[g, i, k, 4] = lj * tq1
             ent[g, i, k, 5] = lj * tq2
             ncontact += 1.0
-            fsum += fn
+            fsum += abs(fn)  # as kernel.py: the mean normal force magnitude
             if homogenise:
                 sxx += d0 * F0
                 sxy += d0 * F1

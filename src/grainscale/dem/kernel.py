@@ -334,7 +334,7 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
             tf[j3 + U1] += lj * tq1
             tf[j3 + U2] += lj * tq2
             ncontact += 1
-            fsum += fn
+            fsum += abs(fn)  # a dashpot pulls as contacts part: keep a magnitude
             if not homogenise:
                 continue
             sxx += d0 * F0
