@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grainscale.analysis import read_columns, unit_element_metrics
+from grainscale.analysis import read_columns, unit_element_metrics, write_columns
 from grainscale.cli import main as grainscale
 from grainscale.config.case import load_rve_case
 from grainscale.dem import element_tests
@@ -47,9 +47,7 @@ def compare(case: Path, out: Path, quiet: bool = False, replicas: int = 0) -> di
     curves = {"pure DEM (drained triaxial)": dem, "MPM x DEM (8 points)": ms}
     if replicas:
         ens = dem_ensemble(case, replicas)
-        header = ",".join(ens)
-        np.savetxt(out / "dem_ensemble.csv", np.column_stack(list(ens.values())),
-                   delimiter=",", header=header, comments="")
+        write_columns(out / "dem_ensemble.csv", ens)
         metrics["against_dem_ensemble"] = unit_element_metrics(ens, ms)
         metrics["dem_replicas"] = replicas
         curves[f"pure DEM, mean of {replicas} realisations"] = ens

@@ -20,6 +20,12 @@ def read_columns(path: str | Path) -> dict[str, np.ndarray]:
     return {c: data[:, k] for k, c in enumerate(cols)}
 
 
+def write_columns(path: str | Path, cols: dict[str, np.ndarray]) -> None:
+    """Equal-length columns as a CSV with a header row (what read_columns reads)."""
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(cols), comments="")
+
+
 def deviation(x_ref, y_ref, x, y, x_max: float, n: int = 501) -> tuple[float, float, float]:
     """(mean |y - y_ref|, range of y_ref, range of y) over [0, x_max] by interpolation."""
     grid = np.linspace(0.0, x_max, n)
@@ -47,4 +53,17 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
     out["pass"] = bool(out["peak_relative_difference"] <= 0.03 and all(
         out[f"mad_{k}_over_{w}_range"] <= 0.03 for k in ("q_over_p", "volumetric_strain")
         for w in ("dem", "multiscale")))
+    if all(f"{k}_sem" in dem for k in ("q_over_p", "volumetric_strain")):
+        # a DEM ensemble mean (element_tests.triaxial_ensemble) against a multiscale
+        # curve averaged over as many RVEs: chaos alone leaves their difference normal
+        # with std sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi)
+        grid = np.linspace(0.0, x_max, 501)
+        for key in ("q_over_p", "volumetric_strain"):
+            sem = np.interp(grid, dem["axial_strain"], dem[f"{key}_sem"])
+            noise = float(np.mean(2.0 * sem / np.sqrt(np.pi)))
+            out[f"noise_{key}_over_dem_range"] = noise / float(np.ptp(np.interp(
+                grid, dem["axial_strain"], dem[key])))
+        out["within_twice_noise"] = bool(all(
+            out[f"mad_{k}_over_dem_range"] <= 2.0 * out[f"noise_{k}_over_dem_range"]
+            for k in ("q_over_p", "volumetric_strain")))
     return out

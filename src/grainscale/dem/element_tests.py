@@ -185,7 +185,9 @@ def triaxial_ensemble(packing: RVEBatch, params: RVEParams, test: TriaxialTest,
     """Mean stress path of the drained triaxial test over `replicas` copies of one
     packing whose grain velocities differ by ~1e-9 m/s: chaos makes each a different
     realisation of the same RVE, as the RVEs of a multiscale run's points become, so this
-    is the like-for-like reference of a multiscale curve (docs/validation.md §1)."""
+    is the like-for-like reference of a multiscale curve (docs/validation.md §1). Also
+    `q_over_p_sem` and `volumetric_strain_sem`: the standard error of those means,
+    std / sqrt(replicas), the realisation noise left in them."""
     rng = np.random.default_rng(seed)
     copies = []
     for _ in range(replicas):
@@ -194,4 +196,8 @@ def triaxial_ensemble(packing: RVEBatch, params: RVEParams, test: TriaxialTest,
         copies.append(b)
     per_rve = triaxial(concatenate(copies), params, test, every_rve=True)
     cols = per_rve[0][0].keys()
-    return {k: np.mean([[row[k] for row in rows] for rows in per_rve], axis=0) for k in cols}
+    paths = {k: np.array([[row[k] for row in rows] for rows in per_rve]) for k in cols}
+    out = {k: v.mean(axis=0) for k, v in paths.items()}
+    for k in ("q_over_p", "volumetric_strain"):
+        out[f"{k}_sem"] = paths[k].std(axis=0, ddof=1) / math.sqrt(replicas)
+    return out
