@@ -99,6 +99,22 @@ def test_run_writes_outputs(tmp_path):
     assert m.point_data["stress"].shape[1] == 9
 
 
+def test_a_new_run_replaces_an_earlier_runs_frames(tmp_path):
+    """A shorter run into the folder of a longer one (no --resume) leaves only its own
+    frames, and nothing but grainscale's outputs is removed."""
+    case = _case(tmp_path)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--quiet"]) == 0
+    n_long = len(list((out / "frames").glob("frame_*.vtu")))
+    (out / "notes.txt").write_text("mine")
+    (out / "frames" / "mine.vtu").write_text("mine")
+    assert main(["run", str(case), "--out", str(out), "--max-steps", "3", "--quiet"]) == 0
+    frames = sorted(f.name for f in (out / "frames").glob("frame_*.vtu"))
+    assert 0 < len(frames) < n_long
+    assert all(f in (out / "frames.pvd").read_text() for f in frames)
+    assert (out / "notes.txt").exists() and (out / "frames" / "mine.vtu").exists()
+
+
 def test_max_steps_writes_final_row(tmp_path):
     case = _case(tmp_path)
     out = tmp_path / "out"

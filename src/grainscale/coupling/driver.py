@@ -202,6 +202,20 @@ def run_case(case_path, out, *, max_steps: int | None = None,
         raise
 
 
+# what a run writes besides history.csv and the checkpoints (module docstring); a new run
+# removes an earlier run's, so that no frame of it is read as one of the new run's
+EARLIER_OUTPUTS = ("frames/frame_*.vtu", "frames/rigid_*.vtu", "frames/probe_*.vtu",
+                   "probe_*.pvd", "rigid.pvd", "probes.json", "cost.json")
+
+
+def discard_outputs(out: Path) -> None:
+    """Remove the frames, probe series and cost report an earlier run left in `out` (the
+    patterns of EARLIER_OUTPUTS only: nothing else in the folder is touched)."""
+    for pattern in EARLIER_OUTPUTS:
+        for f in out.glob(pattern):
+            f.unlink(missing_ok=True)
+
+
 def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_steps,
          steps_this_run, every: int, found: checkpoints.Checkpoint | None,
          progress: bool, probes: list[Probe]) -> int:
@@ -239,6 +253,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
         last_row_step = -1
         if root:
             checkpoints.discard(out)  # an earlier run's: they do not match the new history
+            discard_outputs(out)
             history = History(out / "history.csv", columns, case.title)
             pvd = PVDSeries(out / "frames.pvd")
             rigid_pvd = PVDSeries(out / "rigid.pvd")
