@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from grainscale.config.rve import RVEParams
-from grainscale.dem import engine
+from grainscale.dem import engine, kernel
 from grainscale.dem.generate import contact_params, generate
 from grainscale.dem.state import RVEBatch, concatenate, state_arrays
 
@@ -75,6 +75,47 @@ def thread_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: in
     t1 = time_steps(batch, cp, ctrl, dt, steps, repeats=2)
     numba.set_num_threads(cores)
     return t1, time_steps(batch, cp, ctrl, dt, steps, repeats=2)
+
+
+@numba.njit(parallel=True)
+def _contiguous_batch(nsteps, law, st, ctl, status, out):
+    """kernel.advance_batch as it was: prange's contiguous blocks of RVEs per thread."""
+    for r in numba.prange(st.s.shape[0]):
+        status[r] = kernel.advance_rve(nsteps[r], law, kernel.rve_state(st, r),
+                                       kernel.rve_controls(ctl, r), out[r])
+
+
+def skewed_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: int,
+                 cores: int) -> dict[str, float]:
+    """Wall times [s] on `cores` threads of a batch whose first quarter takes 8 x the steps
+    of the rest (the costly quasi-static RVEs near an intruder are neighbouring points):
+    kernel.advance_batch (RVEs dealt to threads in turn, costliest first) against
+    contiguous blocks, and the ideal (1-thread time / cores). Best of 2, same state."""
+    r = batch.n_rve
+    nsteps = np.full(r, steps, np.int64)
+    nsteps[: r // 4] *= 8
+    ctrl = shear_control(batch)
+    engine.advance(batch, 10, dt, cp, ctrl)
+    law = engine.contact_law(cp)
+    ctl = kernel.Controls(float(dt), np.broadcast_to(np.eye(3), (r, 3, 3)).copy(),
+                          np.zeros((r, 3, 3)), ctrl.hdot_fixed, ctrl.l_ctrl, ctrl.servo_mask,
+                          ctrl.servo_target, float(ctrl.servo_gain), ctrl.max_rate)
+
+    def best(fn) -> float:
+        t = np.inf
+        for _ in range(2):
+            b = batch.copy()
+            status, out = np.zeros(r, np.int64), np.zeros((r, 5))
+            t0 = time.perf_counter()
+            fn(nsteps, law, engine.rve_arrays(b), ctl, status, out)
+            t = min(t, time.perf_counter() - t0)
+        return t
+
+    numba.set_num_threads(1)
+    one = best(kernel.advance_batch)
+    numba.set_num_threads(cores)
+    return {"dealt": best(kernel.advance_batch), "contiguous": best(_contiguous_batch),
+            "ideal": one / cores}
 
 
 def cuda_throughput(base: RVEBatch, cp: engine.ContactParams, dt: float, rves: int,
@@ -212,6 +253,13 @@ def main() -> None:
     print(f"\nbatch of {args.big_batch} RVEs x {n} spheres, {gsteps} steps: "
           f"{ns_batch:.1f} core-ns/particle-step on 1 thread, parallel efficiency "
           f"{eff_batch:.3f} on {cores} threads")
+    # uneven work per RVE (quasi-static RVEs), the scheduling of kernel.advance_batch
+    sk = skewed_times(decorrelated_batch(base, 16, rng), cp, dt, 10 if args.quick else 50,
+                      cores)
+    print(f"\nbatch of 16 RVEs, the first 4 taking 8 x the steps, on {cores} threads: "
+          f"efficiency {sk['ideal'] / sk['dealt']:.3f} dealt costliest first, "
+          f"{sk['ideal'] / sk['contiguous']:.3f} in contiguous blocks "
+          f"(time ratio {sk['contiguous'] / sk['dealt']:.2f})")
     print(json.dumps({
         "ns_per_particle_step": round(ns_default, 2), "parallel_efficiency": round(eff, 3),
         "ns_per_particle_step_batch": round(ns_batch, 2), "batch_rves": args.big_batch,
@@ -220,6 +268,8 @@ def main() -> None:
         "bytes_per_particle": round(mem / (args.batch * n)),
         "skin_variants_ns": {str(s): round(v, 2) for s, v, _ in rows},
         "restitution_0.9_ns": round(ns_e, 2),
+        "skewed_efficiency_dealt": round(sk["ideal"] / sk["dealt"], 3),
+        "skewed_efficiency_contiguous": round(sk["ideal"] / sk["contiguous"], 3),
         "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
     }))
 

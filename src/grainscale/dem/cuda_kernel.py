@@ -64,6 +64,7 @@ from numba import cuda, float64
 
 from grainscale.dem.kernel import SERVO_EVERY
 from grainscale.dem.neighbours import Status
+from grainscale.linalg3 import inv3
 
 THREADS = 128  # block size (threads per RVE) of calls that name none; may be set
 MAX_BLOCKS = 1024  # blocks (RVEs in flight); the scratch is per block
@@ -107,24 +108,8 @@ def _min(a, b):
     return b if b < a else a
 
 
-@cuda.jit(device=True)
-def _inv3(a, out):
-    """out = a^-1 (3x3; adjugate over det a, as linalg3.inv3); returns det a."""
-    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
-    inv = 1.0 / det
-    out[0, 0] = c00 * inv
-    out[1, 0] = c01 * inv
-    out[2, 0] = c02 * inv
-    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * inv
-    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * inv
-    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * inv
-    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * inv
-    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * inv
-    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * inv
-    return det
+# out = a^-1 of a 3x3, returns det a: the CPU's own function, compiled for the device
+_inv3 = cuda.jit(device=True)(inv3.py_func)
 
 
 @cuda.jit(device=True)

@@ -58,7 +58,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from grainscale.dem.neighbours import Status, build, image_table
 from grainscale.linalg3 import det3, inv3
@@ -636,12 +636,30 @@ def advance_rve(nsteps, law, st, ctl, out):
     return status
 
 
-@njit(cache=True, parallel=True)
 def advance_batch(nsteps, law, st, ctl, status, out):
     """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs.
 
     st and ctl hold the batch's arrays (RVE index first); status (R,) receives each RVE's
     status code and out (R,5) its outputs (see advance_rve).
+
+    Load balance: the RVEs' costs (proportional to nsteps) can differ by orders of
+    magnitude, and the costly ones sit together (quasi-static RVEs near an intruder are
+    neighbouring points), where prange's contiguous blocks would leave threads idle.
+    The RVEs are dealt to the threads in turn, costliest first. Each RVE is advanced
+    alone, so the results do not depend on which thread takes it.
     """
-    for r in prange(st.s.shape[0]):
-        status[r] = advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r), out[r])
+    nthr = max(1, min(get_num_threads(), st.s.shape[0]))
+    _advance_dealt(nsteps, law, st, ctl, status, out, nthr)
+
+
+@njit(cache=True, parallel=True)
+def _advance_dealt(nsteps, law, st, ctl, status, out, nthr):
+    """advance_batch's loop: lane t of nthr takes the RVEs of rank t, t + nthr, ... in
+    descending nsteps (the thread count is an argument: a cached function cannot read it)."""
+    nrve = st.s.shape[0]
+    order = np.argsort(-nsteps, kind="mergesort")
+    for t in prange(nthr):
+        for k in range(t, nrve, nthr):
+            r = order[k]
+            status[r] = advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
+                                    out[r])
