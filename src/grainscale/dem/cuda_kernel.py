@@ -64,7 +64,7 @@ from numba import cuda, float64
 
 from grainscale.dem.kernel import SERVO_EVERY
 from grainscale.dem.neighbours import Status
-from grainscale.linalg3 import inv3
+from grainscale.linalg3 import det3, inv3
 
 THREADS = 128  # block size (threads per RVE) of calls that name none; may be set
 MAX_BLOCKS = 1024  # blocks (RVEs in flight); the scratch is per block
@@ -112,12 +112,7 @@ def _min(a, b):
 _inv3 = cuda.jit(device=True)(inv3.py_func)
 
 
-@cuda.jit(device=True)
-def _det3(a):
-    """det a (3x3) by cofactors along the first row, as linalg3.det3."""
-    return (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
-            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
-            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
+_det3 = cuda.jit(device=True)(det3.py_func)  # linalg3.det3 on the device
 
 
 @cuda.jit(device=True)
