@@ -1,8 +1,10 @@
 """Checkpoints that check themselves: checksums, the fallback to the previous checkpoint,
 and a resume refused when the case's physics changed (issue 13, item 2)."""
 
+import os
 import shutil
 import textwrap
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -166,6 +168,50 @@ def test_no_valid_checkpoint_is_an_error(stopped, capsys):
     assert "rank_00000.h5: array points/x does not match its checksum" in err
     assert f"{out / 'checkpoint.prev.h5'}: unreadable" in err
     assert (out / "history.csv").read_bytes() == history  # nothing touched
+
+
+def test_a_history_shorter_than_the_checkpoint_is_refused(stopped, capsys):
+    """history.csv cut back behind the rows the newest checkpoint counts (a copy from an
+    older stage, or rows lost to a crash): the resume stops with a clear error before it
+    writes anything, instead of continuing with a gap in the history."""
+    case, out = stopped
+    lines = (out / "history.csv").read_text().splitlines(keepends=True)
+    short = "".join(lines[:-2]) + lines[-2][:5]  # the last row gone, the one before cut
+    (out / "history.csv").write_text(short)
+    manifest = (out / "checkpoint.h5").read_bytes()
+    assert _run(case, out, "--resume") == 2
+    err = capsys.readouterr().err
+    n_rows = sum(not ln.startswith("#") for ln in lines) - 1  # the column names aside
+    assert f"holds {n_rows - 2} complete data rows" in err, err
+    # the stop's final row comes after the last checkpoint, which does not count it
+    assert f"written after row {n_rows - 1}" in err and "without --resume" in err
+    assert (out / "history.csv").read_text() == short  # nothing touched
+    assert (out / "checkpoint.h5").read_bytes() == manifest
+
+
+def test_history_rows_are_on_disk_before_a_checkpoint_counts_them(tmp_path, monkeypatch):
+    """Every save fsyncs history.csv before the checkpoint that records its row count."""
+    import grainscale.coupling.checkpoints as checkpoints
+    import grainscale.io.history as history
+
+    events = []
+    fsync, save = history.os.fsync, checkpoints.save
+
+    def traced_fsync(fd):
+        events.append(("fsync", Path(os.readlink(f"/proc/self/fd/{fd}")).name))
+        fsync(fd)
+
+    def traced_save(*args, **kwargs):
+        events.append(("save",))
+        return save(*args, **kwargs)
+
+    monkeypatch.setattr(history.os, "fsync", traced_fsync)
+    monkeypatch.setattr(checkpoints, "save", traced_save)
+    assert _run(_case(tmp_path / "case.toml"), tmp_path / "out", "--max-steps", "25") == 0
+    saves = [i for i, e in enumerate(events) if e == ("save",)]
+    assert len(saves) == 3  # steps 10, 20 and the stop at 25
+    for i in saves:
+        assert events[i - 1] == ("fsync", "history.csv")
 
 
 def test_changed_physics_is_refused_unless_allowed(stopped, tmp_path, capsys):

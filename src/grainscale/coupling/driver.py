@@ -43,7 +43,7 @@ from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.dem.engine import check_device
 from grainscale.distributed.comm import Comm, world
 from grainscale.io import faults
-from grainscale.io.history import History
+from grainscale.io.history import History, HistoryMismatch
 from grainscale.io.progress import Progress
 from grainscale.io.vtk import PVDSeries, write_points_vtu
 from grainscale.mpm.materials import KINDS
@@ -242,9 +242,17 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
         # output slots (a step can span several intervals) and what was actually written
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
         last_row_step = int(c.get("last_row_step", -1))
+        mismatch = None
         if root:
-            history = History(out / "history.csv", columns, case.title,
-                              resume_rows=int(c["rows_written"]))
+            try:
+                history = History(out / "history.csv", columns, case.title,
+                                  resume_rows=int(c["rows_written"]))
+            except HistoryMismatch as err:
+                mismatch = str(err)
+        mismatch = comm.bcast(mismatch)  # every rank stops, none waits for rank 0
+        if mismatch is not None:
+            raise ConfigError(mismatch)
+        if root:
             pvd = PVDSeries.load(out / "frames.pvd", keep=int(c["frames_written"]))
             rigid_pvd = PVDSeries.load(out / "rigid.pvd",
                                        keep=int(c["rigid_frames_written"]))
@@ -291,6 +299,8 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
 
     def save() -> None:
         nonlocal previous, saved_step
+        if root:
+            history.sync()  # on disk before the checkpoint counts its rows
         checkpoints.save(out, s, counters(), record, previous)
         previous, saved_step = out / checkpoints.MANIFEST, s.step
 

@@ -1,16 +1,23 @@
 """history.csv: one row per output interval, named columns, a commented header.
 
 The header states units and the sign convention. Rows are appended and flushed one at a
-time, so a run that stops (or fails) keeps every row written so far intact.
+time, so a run that stops (or fails) keeps every row written so far intact; `sync` also
+puts them on disk (fsync) before a checkpoint counts them, so a resume after a power loss
+finds every row the checkpoint expects.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 from grainscale.io import faults
+
+
+class HistoryMismatch(ValueError):
+    """history.csv holds fewer rows than the checkpoint a resume starts from expects."""
 
 UNITS = {
     "step": "-", "time": "s", "dt": "s", "kinetic_energy": "J", "t_over_tc": "-",
@@ -53,10 +60,17 @@ class History:
         self._f = open(self.path, "a")  # noqa: SIM115 (kept open for the run)
 
     def truncate(self, n_rows: int) -> None:
-        """Keep the header and the first n_rows data rows (resume)."""
+        """Keep the header and the first n_rows data rows (resume); HistoryMismatch,
+        with the file untouched, if it holds fewer complete rows."""
         lines = self.path.read_text().splitlines(keepends=True)
         n_head = next(i for i, ln in enumerate(lines) if not ln.startswith("#")) + 1
         kept = lines[:n_head + n_rows]
+        complete = sum(ln.endswith("\n") for ln in kept[n_head:])
+        if complete < n_rows:
+            raise HistoryMismatch(
+                f"{self.path} holds {complete} complete data rows, but the checkpoint to "
+                f"resume from was written after row {n_rows}: the file was replaced or cut "
+                f"short; restore it, or start the run afresh without --resume")
         tmp = self.path.with_name(self.path.name + ".tmp")
         tmp.write_text("".join(kept))
         faults.point("history.truncate_tmp")
@@ -77,6 +91,11 @@ class History:
         self._f.write(line)
         self._f.flush()
         self.rows += 1
+
+    def sync(self) -> None:
+        """Every row written so far on disk (flush and fsync)."""
+        self._f.flush()
+        os.fsync(self._f.fileno())
 
     def close(self) -> None:
         self._f.close()
