@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from dem_helpers import agitated_dense_state  # noqa: E402
 
 from grainscale.dem import cuda_kernel, engine  # noqa: E402
-from grainscale.dem.state import RVEBatch, concatenate  # noqa: E402
+from grainscale.dem.state import RVEBatch, concatenate, from_packing  # noqa: E402
 
 THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
 
@@ -137,6 +137,33 @@ def main() -> None:
     res["damped"]["untouched"] = all(
         np.array_equal(getattr(base, f)[0], getattr(gpu, f)[0])
         for f in ("s", "v", "w", "ft", "stress", "step_count", "ncontact", "kinetic"))
+    # 5. a particle named by more half-list entries than the reverse list holds (2 K):
+    # 12 spheres on an icosahedron 2.25 mm around a 13th, last by index. All are 1 mm
+    # spheres, so the list cutoff is 2.3 mm: each outer sphere lists the centre one
+    # (no contact, 0.25 mm apart) but not its icosahedral neighbours (2.37 mm apart).
+    # Every row holds at most one entry and fits K = 3, while the centre sphere is named
+    # 12 > 6 times; engine.advance regrows K to at least 6 and retries. A touching pair
+    # elsewhere in the cell gives a tangential history to compare.
+    gold = (1.0 + 5.0 ** 0.5) / 2.0
+    ico = np.array([(0.0, a, b * gold) for a in (-1, 1) for b in (-1, 1)]
+                   + [(a, b * gold, 0.0) for a in (-1, 1) for b in (-1, 1)]
+                   + [(b * gold, 0.0, a) for a in (-1, 1) for b in (-1, 1)])
+    ico /= np.linalg.norm(ico, axis=1)[:, None]
+    centre = np.full(3, 6.0e-3)
+    pos = np.array([[0.5e-3, 0.5e-3, 0.5e-3], [2.48e-3, 0.5e-3, 0.5e-3]]
+                   + [centre + 2.25e-3 * d for d in ico] + [centre])
+    star = from_packing(np.eye(3) * 12.0e-3, pos, np.full(len(pos), 1.0e-3), 2500.0,
+                        capacity=3)
+    rng = np.random.default_rng(7)
+    star.v[0] = rng.normal(0.0, 0.01, star.v[0].shape)
+    star.w[0] = rng.normal(0.0, 10.0, star.w[0].shape)
+    star.need_rebuild[:] = 1
+    cpu, gpu = star.copy(), star.copy()
+    engine.advance(cpu, 8, dt, p, engine.rate_control(1))
+    engine.advance(gpu, 8, dt, p, engine.rate_control(1), device="cuda")
+    res["reverse_overflow"] = compare(cpu, gpu)
+    res["reverse_overflow"]["named"] = int(np.count_nonzero(gpu.nbr_j[0] == len(pos) - 1))
+    res["reverse_overflow"]["longest_row"] = int(cpu.nbr_count.max())
     res["seconds"] = time.perf_counter() - t0
     print(json.dumps(res))
 

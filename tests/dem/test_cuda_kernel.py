@@ -121,6 +121,18 @@ def test_capacity_overflow_is_regrown_by_engine(sim):
         assert res[name] < RTOL, (name, res[name])
 
 
+def test_reverse_list_overflow_is_regrown_by_engine(sim):
+    """One sphere named by 12 half-list entries, rows of K = 3 (2 K reverse slots): the
+    device stops with OVERFLOW, engine.advance regrows K, and the retried steps agree
+    with the CPU, whose rows (one entry at most) never overflowed: it keeps K = 3."""
+    res = sim["reverse_overflow"]
+    assert res["named"] == 12 and res["longest_row"] == 1
+    assert res["capacity"][0] == 3 and res["capacity"][1] >= 6
+    assert res["same_counts"] and res["same_pairs"]
+    for name in ARRAYS:
+        assert res[name] < RTOL, (name, res[name])
+
+
 def test_momentum_is_conserved_in_a_fixed_periodic_cell(sim):
     # no damping, no cell motion: pairwise-opposite contact forces leave sum m v fixed
     assert sim["momentum_rel"] < 1e-13
