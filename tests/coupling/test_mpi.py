@@ -274,3 +274,19 @@ def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp
     assert interrupted_history(path, out, first=2, steps=9, then=3) == history
     sizes = meshio.read(sorted((out / "frames").glob("frame_*.vtu"))[-1]).point_data
     assert set(np.unique(sizes["rve_particles"])) == {120.0, 240.0}
+
+
+def test_ranks_know_their_place_on_the_node(tmp_path):
+    """node_rank numbers the ranks of a node 0..n-1 (each picks GPU node_rank % GPUs
+    under `--device cuda`, cuda_kernel.select_gpu); node_ranks counts them."""
+    script = tmp_path / "where.py"
+    script.write_text(textwrap.dedent(f"""
+        from pathlib import Path
+        from grainscale.distributed.comm import world
+        c = world()
+        Path(r"{tmp_path}", f"rank{{c.rank}}").write_text(f"{{c.node_rank()}} {{c.node_ranks()}}")
+    """))
+    r = mpirun(3, [], timeout=120, script=script)
+    assert r.returncode == 0, r.stderr
+    found = [tuple(map(int, (tmp_path / f"rank{k}").read_text().split())) for k in range(3)]
+    assert found == [(0, 3), (1, 3), (2, 3)]  # one machine: one node

@@ -17,6 +17,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import types
 from pathlib import Path
 
 import numpy as np
@@ -205,3 +206,16 @@ def test_cli_device_cuda_without_gpu_exits_2(tmp_path, monkeypatch, capsys):
     assert code == 2
     assert "solver.device = 'cuda'" in err and "'cpu'" in err
     assert not (tmp_path / "out" / "frames").exists()  # refused before any work
+
+
+def test_ranks_of_a_node_share_its_gpus_round_robin(monkeypatch):
+    """Under MPI each rank selects GPU node_rank % (visible GPUs) before any kernel; one
+    visible GPU per rank (CUDA_VISIBLE_DEVICES set per rank) gives device 0 to all."""
+    cuda_kernel = pytest.importorskip("grainscale.dem.cuda_kernel")
+    chosen = []
+    monkeypatch.setattr(cuda_kernel, "cuda", types.SimpleNamespace(
+        gpus=[object()] * 4, select_device=chosen.append))
+    assert [cuda_kernel.select_gpu(r) for r in range(6)] == [0, 1, 2, 3, 0, 1]
+    assert chosen == [0, 1, 2, 3, 0, 1]
+    monkeypatch.setattr(cuda_kernel.cuda, "gpus", [object()])
+    assert [cuda_kernel.select_gpu(r) for r in range(3)] == [0, 0, 0]

@@ -171,6 +171,10 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     record = checkpoints.case_record(case)  # before the run fills in values
     set_threads(case, threads, comm)
     check_device(case.solver.device)
+    if case.solver.device == "cuda" and comm.size > 1:
+        from grainscale.dem.cuda_kernel import select_gpu
+
+        select_gpu(comm.node_rank())  # the ranks of a node spread over its GPUs
     every = checkpoint_every if checkpoint_every is not None else case.output.checkpoint_every
     if allow_changed and not resume:
         raise ConfigError(f"--allow-changed {' '.join(allow_changed)}: applies only with "

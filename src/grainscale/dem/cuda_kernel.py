@@ -82,6 +82,16 @@ def is_available() -> bool:
         return False
 
 
+def select_gpu(node_rank: int) -> int:
+    """Make GPU node_rank % (visible GPUs) this process's device, so that the MPI ranks
+    of a node share its GPUs round robin (one visible GPU per rank, as set by
+    CUDA_VISIBLE_DEVICES, gives device 0). Call before any kernel runs. Returns its
+    index among the visible GPUs."""
+    dev = node_rank % len(cuda.gpus)
+    cuda.select_device(dev)
+    return dev
+
+
 # --------------------------------------------------------------------- device helpers
 @cuda.jit(device=True)
 def _signed(f, u):

@@ -91,11 +91,22 @@ class Comm:
 
     def node_ranks(self) -> int:
         """Ranks sharing this rank's node (for the default thread count)."""
+        return self._node()[1]
+
+    def node_rank(self) -> int:
+        """This rank's index among the ranks of its node (for its GPU)."""
+        return self._node()[0]
+
+    def _node(self) -> tuple[int, int]:
         if self.mpi is None:
-            return 1
+            return 0, 1
         from mpi4py import MPI
 
-        return self.mpi.Split_type(MPI.COMM_TYPE_SHARED).Get_size()
+        node = self.mpi.Split_type(MPI.COMM_TYPE_SHARED)
+        try:
+            return node.Get_rank(), node.Get_size()
+        finally:
+            node.Free()
 
 
 def launched_by_mpi() -> bool:
