@@ -3,7 +3,7 @@
     python examples/column_collapse/convergence.py --out DIR [--cells 10 5 2.5 1.25]
         [--materials mu_i mohr_coulomb] [--friction-angle 22] [--points-per-cell 2]
         [--floor friction|fixed|roller|penalty] [--cfl 0.5] [--t-end 7]
-        [--velocity-update apic|flip|aflip] [--flip F]
+        [--velocity-update apic|flip|aflip] [--flip F | --relaxation-time TAU]
 
 Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
 a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
@@ -50,23 +50,30 @@ X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 
 def case_at(h: float, material: str, friction_angle: float, points_per_cell: int = 2,
             floor: str = "friction", cfl: float = 0.5, t_end: float = 7.0,
-            update: str = "apic", flip: float | None = None) -> dict:
+            update: str = "apic", flip: float | None = None,
+            relaxation_time: float | None = None) -> dict:
     """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
     twin; n x n x n points a cell; the floor as in mu_i.toml (`friction`, Coulomb 0.466
     on the grid nodes), no-slip (`fixed`), frictionless (`roller`: the mass slides on
     and leaves the grid, compare at early times), or a rigid box under z = 0 with the penalty
     contact and the same friction (`penalty`, docs/mpm.md: rigid body; the grid then
-    reaches two cells below the floor); runs end at t_end tau_c; `update` and `flip` are
-    solver.velocity_update and solver.flip (docs/mpm.md: velocity update)."""
+    reaches two cells below the floor); runs end at t_end tau_c; `update`, `flip` and
+    `relaxation_time` are solver.velocity_update, solver.flip and
+    solver.velocity_relaxation_time [s] (docs/mpm.md: velocity update)."""
     case = tomllib.loads((HERE / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
     case["bodies"][0]["hi"][1] = h
     case["bodies"][0]["points_per_cell"] = points_per_cell
     case["solver"]["cfl"] = cfl
-    case["solver"]["velocity_update"] = update
+    solver = case["solver"]
+    solver["velocity_update"] = update
+    solver.pop("flip", None)
+    solver.pop("velocity_relaxation_time", None)
     if flip is not None:
-        case["solver"]["flip"] = flip
+        solver["flip"] = flip
+    if relaxation_time is not None:
+        solver["velocity_relaxation_time"] = relaxation_time
     if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
         case["time"]["end"] = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
     for bc in case["boundaries"]:
@@ -98,11 +105,13 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
 
 
 def variant(points_per_cell: int, floor: str, cfl: float, t_end: float,
-            update: str = "apic", flip: float | None = None) -> str:
+            update: str = "apic", flip: float | None = None,
+            relaxation_time: float | None = None) -> str:
     """Suffix of a run folder for the non-default options ('' for mu_i.toml's)."""
     return ((f"_n{points_per_cell}" if points_per_cell != 2 else "")
             + (f"_{update}" if update != "apic" else "")
             + (f"{flip:g}" if flip is not None else "")
+            + (f"_tau{relaxation_time * 1e3:g}ms" if relaxation_time is not None else "")
             + (f"_{floor}" if floor != "friction" else "")
             + (f"_cfl{cfl:g}" if cfl != 0.5 else "")
             + (f"_t{t_end:g}" if t_end != 7.0 else ""))
@@ -229,16 +238,19 @@ def main() -> None:
     ap.add_argument("--velocity-update", default="apic", choices=["apic", "flip", "aflip"])
     ap.add_argument("--flip", type=float, default=None,
                     help="FLIP share of --velocity-update flip or aflip")
+    ap.add_argument("--relaxation-time", type=float, default=None,
+                    help="solver.velocity_relaxation_time [s] of flip or aflip")
     args = ap.parse_args()
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
         for mm in sorted(args.cells, reverse=True):
             suffix = variant(args.points_per_cell, args.floor, args.cfl, args.t_end,
-                             args.velocity_update, args.flip)
+                             args.velocity_update, args.flip, args.relaxation_time)
             out = args.out / f"{mat}_{mm:g}mm{suffix}"
             case = case_at(mm * 1e-3, mat, args.friction_angle, args.points_per_cell,
-                           args.floor, args.cfl, args.t_end, args.velocity_update, args.flip)
+                           args.floor, args.cfl, args.t_end, args.velocity_update, args.flip,
+                           args.relaxation_time)
             wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h

@@ -20,11 +20,11 @@ def _convergence():
     return mod
 
 
-def _runout(tmp_path, cfl, update="apic"):
+def _runout(tmp_path, cfl, update="apic", relaxation_time=None):
     conv = _convergence()
-    case = conv.case_at(0.005, "mu_i", 22.0)  # mu_i.toml at 5 mm cells: 20-40 s a run
-    case["solver"]["cfl"] = cfl
-    case["solver"]["velocity_update"] = update
+    # mu_i.toml at 5 mm cells: 20-40 s a run
+    case = conv.case_at(0.005, "mu_i", 22.0, cfl=cfl, update=update,
+                        relaxation_time=relaxation_time)
     path = tmp_path / f"case_{update}_{cfl}.toml"
     path.write_text(tomli_w.dumps(case))
     out = tmp_path / f"out_{update}_{cfl}"
@@ -65,4 +65,25 @@ def test_halving_dt_leaves_the_aflip_runout_and_deposit(tmp_path):
         runs.append(r)
     coarse, fine = runs
     assert fine["runout"] == pytest.approx(coarse["runout"], rel=0.02)
+    assert fine["runout_3d"] == pytest.approx(coarse["runout_3d"], rel=0.01)
+
+
+def test_halving_dt_leaves_the_relaxed_aflip_runout(tmp_path):
+    """AFLIP with the PIC share set per unit time (velocity_relaxation_time = 0.01 s,
+    about tau_c / 8): no loss once per step, and the sub-grid velocity relaxes at a rate
+    that does not depend on dt. Measured: runout 1.129 and 1.131 (0.2 %), the deposit at
+    least 3 beads thick 1.050 at both steps (at 2.5 mm cells 1.335 and 1.335); the
+    issue's 1 % is the bound. Both come to rest (front stopped before 5 tau_c; kinetic
+    energy below 1e-5 of its peak at 7 tau_c, where pure AFLIP keeps 3e-3)."""
+    conv = _convergence()
+    runs = []
+    for cfl in (0.5, 0.25):
+        r = _runout(tmp_path, cfl, "aflip", relaxation_time=0.01)
+        case = conv.case_at(0.005, "mu_i", 22.0)
+        r.update(conv.thick_runouts(*conv.deposit(tmp_path / f"out_aflip_{cfl}", case)))
+        assert r["runout"] > 0.8 and r["front_stop_t_over_tc"] < 5.0
+        assert r["kinetic_energy_end_over_peak"] < 1e-5
+        runs.append(r)
+    coarse, fine = runs
+    assert fine["runout"] == pytest.approx(coarse["runout"], rel=0.01)
     assert fine["runout_3d"] == pytest.approx(coarse["runout_3d"], rel=0.01)

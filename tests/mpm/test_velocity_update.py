@@ -9,7 +9,9 @@ from grainscale.config.base import ConfigError, load_toml
 from grainscale.config.case import Case
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
-from grainscale.mpm.step import kinetic_energy, step
+from grainscale.mpm.materials import LinearElastic
+from grainscale.mpm.points import fill_box, make_points
+from grainscale.mpm.step import MPMState, kinetic_energy, step
 
 
 def _bar_energy(update, flip, cfl, periods):
@@ -61,6 +63,43 @@ def test_aflip_keeps_the_energy_of_a_vibrating_bar(cfl):
     assert abs(_bar_energy("aflip", 1.0, cfl, 10) - 1.0) < 2e-3
 
 
+def _twin_points(update, **kw):
+    """Every point twice, at one position, the two with opposite random velocities: the
+    nodal momentum is exactly zero (fixed-point sums of +c and -c), so the grid field is
+    zero, nothing moves or strains, and what a step does to v_p is the velocity update's
+    blend alone, v_p <- flip v_p."""
+    grid = Grid.make([0, 0, 0], 0.1, [4, 4, 4])
+    x, vol = fill_box(grid, [0.1, 0.1, 0.1], [0.3, 0.3, 0.3], 2)
+    x, vol = np.concatenate([x, x]), np.concatenate([vol, vol])
+    pts = make_points(x, vol, 1000.0, 0)
+    v = np.random.default_rng(1).normal(size=(len(vol) // 2, 3))
+    pts.v[:] = np.concatenate([v, -v])
+    mat = LinearElastic("m", pts.n, density=1000.0, youngs_modulus=1e6, poisson_ratio=0.3)
+    s = MPMState(grid=grid, points=pts, materials=[mat], mat_points=[None],
+                 velocity_update=update, **kw)
+    return s, pts.v.copy()
+
+
+@pytest.mark.parametrize("update", ["flip", "aflip"])
+def test_relaxation_time_sets_the_pic_share_per_unit_time(update):
+    """velocity_relaxation_time tau: the velocity a point carries beyond the grid's field
+    decays as exp(-t / tau), whatever the step (flip = exp(-dt / tau) each step), where a
+    fixed flip = 0.98 decays as 0.98^(t / dt), twice as fast when dt is halved."""
+    tau, t = 0.01, 0.004
+    for n in (40, 80):
+        s, v0 = _twin_points(update, relaxation_time=tau)
+        x0 = s.points.x.copy()
+        for _ in range(n):
+            step(s, t / n)
+        np.testing.assert_allclose(s.points.v, np.exp(-t / tau) * v0, rtol=1e-12, atol=0)
+        assert np.array_equal(s.points.x, x0)  # the grid field is zero: nothing moved
+    for n in (40, 80):
+        s, v0 = _twin_points(update, flip=0.98)
+        for _ in range(n):
+            step(s, t / n)
+        np.testing.assert_allclose(s.points.v, 0.98**n * v0, rtol=1e-12, atol=0)
+
+
 def _load(tmp_path, solver):
     return load_toml(small_case(tmp_path, solver=solver), Case)
 
@@ -75,3 +114,13 @@ def test_velocity_update_keys(tmp_path):
         _load(tmp_path, "flip = 0.98")
     with pytest.raises(ConfigError, match="velocity_update"):
         _load(tmp_path, 'velocity_update = "pic"')
+    # the PIC share per unit time instead of per step
+    cfg = _load(tmp_path, 'velocity_update = "aflip"\nvelocity_relaxation_time = 0.01').solver
+    assert (cfg.flip, cfg.velocity_relaxation_time) == (None, 0.01)
+    with pytest.raises(ConfigError, match=r"velocity_relaxation_time = 0.01 applies to "
+                                          r"velocity_update = 'flip' or 'aflip' only"):
+        _load(tmp_path, "velocity_relaxation_time = 0.01")
+    with pytest.raises(ConfigError, match=r"flip = 0.9 and velocity_relaxation_time = 0.01"):
+        _load(tmp_path, 'velocity_update = "flip"\nflip = 0.9\nvelocity_relaxation_time = 0.01')
+    with pytest.raises(ConfigError, match="velocity_relaxation_time"):
+        _load(tmp_path, 'velocity_update = "flip"\nvelocity_relaxation_time = 0.0')

@@ -48,6 +48,10 @@ class SolverCfg(StrictModel):
     velocity_update: Literal["apic", "flip", "aflip"] = "apic"
     # "flip" and "aflip" only; default FLIP_DEFAULT ("flip") or 1.0 ("aflip")
     flip: Annotated[float, Field(ge=0, le=1)] | None = None
+    # "flip" and "aflip" only, instead of `flip`: the PIC (APIC) share set per unit time,
+    # flip = exp(-dt / velocity_relaxation_time) each step, so that a point's velocity
+    # relaxes toward the grid's field at a rate that does not depend on dt [s]
+    velocity_relaxation_time: Pos | None = None
     cfl: Annotated[float, Field(gt=0, le=1)] = 0.5
     dt: Pos | None = None  # s; fixed step (checked against the CFL limit); default: CFL
     gravity: Vec3 = (0.0, 0.0, 0.0)  # m/s^2
@@ -60,6 +64,19 @@ class SolverCfg(StrictModel):
 
     @model_validator(mode="after")
     def _flip(self):
+        tau = self.velocity_relaxation_time
+        if tau is not None and self.velocity_update == "apic":
+            raise ValueError(
+                f"velocity_relaxation_time = {tau} applies to velocity_update = 'flip' or "
+                f"'aflip' only, and velocity_update = 'apic' (the default); add "
+                "velocity_update = \"aflip\", or remove velocity_relaxation_time")
+        if tau is not None and self.flip is not None:
+            raise ValueError(
+                f"flip = {self.flip} and velocity_relaxation_time = {tau}: give one, the "
+                "FLIP share per step (flip) or the relaxation time that sets it per unit "
+                "time (flip = exp(-dt / velocity_relaxation_time))")
+        if tau is not None:
+            return self
         if self.velocity_update != "apic" and self.flip is None:
             self.flip = FLIP_DEFAULT if self.velocity_update == "flip" else 1.0
         elif self.velocity_update == "apic" and self.flip is not None:

@@ -209,7 +209,9 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         grid=grid, points=pts, materials=materials, mat_points=mat_points,
         constraints=constraints, walls=walls, tractions=tractions, rigid=rigid,
         gravity=np.asarray(s.gravity, dtype=np.float64), scheme=s.scheme, shape=s.shape,
-        velocity_update=s.velocity_update, flip=0.0 if s.flip is None else s.flip, cfl=s.cfl,
+        velocity_update=s.velocity_update, flip=0.0 if s.flip is None else s.flip,
+        relaxation_time=(np.inf if s.velocity_relaxation_time is None
+                         else s.velocity_relaxation_time), cfl=s.cfl,
         damping=case.damping.alpha,
         damping_end=np.inf if case.damping.end_time is None else case.damping.end_time,
         time=t0, step=0, n_threads=n_threads, comm=comm, n_traction_global=n_loaded)

@@ -10,6 +10,7 @@ The stages are plain Python over the numba kernels of `shape` and `transfer`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -60,6 +61,8 @@ class MPMState:
     # "apic"; "flip": the FLIP/PIC blend; "aflip": APIC's affine transfer, FLIP's increment
     velocity_update: str = _SOLVER.velocity_update
     flip: float = FLIP_DEFAULT  # FLIP fraction of "flip" and "aflip" (0 = PIC / APIC)
+    # s; finite: "flip" and "aflip" take flip = exp(-dt / relaxation_time) each step
+    relaxation_time: float = np.inf
     cfl: float = _SOLVER.cfl
     damping: float = _DAMPING.alpha  # local damping coefficient alpha
     damping_end: float = np.inf  # s, damping acts while time < damping_end
@@ -272,7 +275,14 @@ def g2p(s: MPMState, dt: float) -> None:
     """Point velocity (APIC, FLIP/PIC or AFLIP, seed Eq. 18) and position (seed Eq. 19)."""
     pts = s.points
     g = s.grid
-    flip = 0.0 if s.velocity_update == "apic" else s.flip
+    if s.velocity_update == "apic":
+        flip = 0.0
+    elif np.isfinite(s.relaxation_time):
+        # the PIC share per unit time: the velocity a point carries beyond the grid's
+        # field decays as exp(-t / relaxation_time), whatever the step
+        flip = math.exp(-dt / s.relaxation_time)
+    else:
+        flip = s.flip
     g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
                s.velocity_update != "flip", g.origin, g.upper, pts.x, pts.v, pts.C,
                s.chunk_vmax, s.chunk_out)
