@@ -50,7 +50,7 @@ X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 
 def case_at(h: float, material: str, friction_angle: float, points_per_cell: int = 2,
             floor: str = "friction", cfl: float = 0.5, t_end: float = 7.0,
-            update: str = "apic", flip: float | None = None,
+            update: str | None = None, flip: float | None = None,
             relaxation_time: float | None = None) -> dict:
     """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
     twin; n x n x n points a cell; the floor as in mu_i.toml (`friction`, Coulomb 0.466
@@ -58,8 +58,9 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     and leaves the grid, compare at early times), or a rigid box under z = 0 with the penalty
     contact and the same friction (`penalty`, docs/mpm.md: rigid body; the grid then
     reaches two cells below the floor); runs end at t_end tau_c; `update`, `flip` and
-    `relaxation_time` are solver.velocity_update, solver.flip and
-    solver.velocity_relaxation_time [s] (docs/mpm.md: velocity update)."""
+    `relaxation_time` replace mu_i.toml's solver.velocity_update, solver.flip and
+    solver.velocity_relaxation_time [s] when `update` is given (docs/mpm.md: velocity
+    update)."""
     case = tomllib.loads((HERE / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
@@ -67,13 +68,14 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     case["bodies"][0]["points_per_cell"] = points_per_cell
     case["solver"]["cfl"] = cfl
     solver = case["solver"]
-    solver["velocity_update"] = update
-    solver.pop("flip", None)
-    solver.pop("velocity_relaxation_time", None)
-    if flip is not None:
-        solver["flip"] = flip
-    if relaxation_time is not None:
-        solver["velocity_relaxation_time"] = relaxation_time
+    if update is not None:
+        solver["velocity_update"] = update
+        solver.pop("flip", None)
+        solver.pop("velocity_relaxation_time", None)
+        if flip is not None:
+            solver["flip"] = flip
+        if relaxation_time is not None:
+            solver["velocity_relaxation_time"] = relaxation_time
     if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
         case["time"]["end"] = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
     for bc in case["boundaries"]:
@@ -105,11 +107,11 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
 
 
 def variant(points_per_cell: int, floor: str, cfl: float, t_end: float,
-            update: str = "apic", flip: float | None = None,
+            update: str | None = None, flip: float | None = None,
             relaxation_time: float | None = None) -> str:
     """Suffix of a run folder for the non-default options ('' for mu_i.toml's)."""
     return ((f"_n{points_per_cell}" if points_per_cell != 2 else "")
-            + (f"_{update}" if update != "apic" else "")
+            + (f"_{update}" if update is not None else "")
             + (f"{flip:g}" if flip is not None else "")
             + (f"_tau{relaxation_time * 1e3:g}ms" if relaxation_time is not None else "")
             + (f"_{floor}" if floor != "friction" else "")
@@ -235,7 +237,8 @@ def main() -> None:
                     choices=["friction", "fixed", "roller", "penalty"])
     ap.add_argument("--cfl", type=float, default=0.5)
     ap.add_argument("--t-end", type=float, default=7.0, help="end of the runs, in tau_c")
-    ap.add_argument("--velocity-update", default="apic", choices=["apic", "flip", "aflip"])
+    ap.add_argument("--velocity-update", default=None, choices=["apic", "flip", "aflip"],
+                    help="instead of mu_i.toml's (aflip, relaxation time 0.01 s)")
     ap.add_argument("--flip", type=float, default=None,
                     help="FLIP share of --velocity-update flip or aflip")
     ap.add_argument("--relaxation-time", type=float, default=None,
