@@ -16,7 +16,7 @@ import argparse
 import json
 from pathlib import Path
 
-from convergence import case_at, measures, run_one
+from convergence import case_at, measures, run_one, variant
 
 from grainscale.io.history import read_history
 
@@ -32,7 +32,7 @@ def main() -> None:
     rows = {}
     for phi in args.angles:
         out = args.out / (f"mc_{phi:g}deg_{args.cell:g}mm"
-                          + (f"_{args.velocity_update}" if args.velocity_update else ""))
+                          + variant(2, "friction", 0.5, 7.0, args.velocity_update))
         wall = run_one(case_at(args.cell * 1e-3, "mohr_coulomb", phi,
                                update=args.velocity_update), out)
         m = measures(read_history(out / "run" / "history.csv"))

@@ -47,21 +47,28 @@ def test_halving_dt_moves_the_apic_runout_little(tmp_path):
     assert fine["runout"] == pytest.approx(coarse["runout"], rel=0.02)
 
 
+def _aflip_runs(tmp_path, relaxation_time=None):
+    """The 5 mm column with AFLIP at cfl 0.5 and 0.25: (coarse, fine) measures with the
+    thick-deposit runouts; both must have come to rest (front stopped before 5 tau_c)
+    in the flow regime (runout > 0.8)."""
+    conv = _convergence()
+    case = conv.case_at(0.005, "mu_i", 22.0)
+    runs = []
+    for cfl in (0.5, 0.25):
+        r = _runout(tmp_path, cfl, "aflip", relaxation_time=relaxation_time)
+        r.update(conv.thick_runouts(*conv.deposit(tmp_path / f"out_aflip_{cfl}", case)))
+        assert r["runout"] > 0.8 and r["front_stop_t_over_tc"] < 5.0
+        runs.append(r)
+    return runs
+
+
 def test_halving_dt_leaves_the_aflip_runout_and_deposit(tmp_path):
     """The same column with AFLIP (APIC's affine transfer, FLIP's increment, flip = 1):
     no transfer loss once per step, so the energy path does not depend on dt (docs/
     validation.md §2.1). Measured: runout 1.216 and 1.231 (1.2 %), the deposit at least
     3 beads thick ends at 1.075 at both steps; 2 % and 1 % guard these. Both come to
     rest (front stopped before 5 tau_c)."""
-    conv = _convergence()
-    runs = []
-    for cfl in (0.5, 0.25):
-        r = _runout(tmp_path, cfl, "aflip")
-        case = conv.case_at(0.005, "mu_i", 22.0)
-        r.update(conv.thick_runouts(*conv.deposit(tmp_path / f"out_aflip_{cfl}", case)))
-        assert r["runout"] > 0.8 and r["front_stop_t_over_tc"] < 5.0
-        runs.append(r)
-    coarse, fine = runs
+    coarse, fine = _aflip_runs(tmp_path)
     assert fine["runout"] == pytest.approx(coarse["runout"], rel=0.02)
     assert fine["runout_3d"] == pytest.approx(coarse["runout_3d"], rel=0.01)
 
@@ -73,16 +80,9 @@ def test_halving_dt_leaves_the_relaxed_aflip_runout(tmp_path):
     least 3 beads thick 1.050 at both steps (at 2.5 mm cells 1.335 and 1.335); the
     issue's 1 % is the bound. Both come to rest (front stopped before 5 tau_c; kinetic
     energy below 1e-5 of its peak at 7 tau_c, where pure AFLIP keeps 3e-3)."""
-    conv = _convergence()
-    runs = []
-    for cfl in (0.5, 0.25):
-        r = _runout(tmp_path, cfl, "aflip", relaxation_time=0.01)
-        case = conv.case_at(0.005, "mu_i", 22.0)
-        r.update(conv.thick_runouts(*conv.deposit(tmp_path / f"out_aflip_{cfl}", case)))
-        assert r["runout"] > 0.8 and r["front_stop_t_over_tc"] < 5.0
+    coarse, fine = _aflip_runs(tmp_path, relaxation_time=0.01)
+    for r in (coarse, fine):
         assert r["kinetic_energy_end_over_peak"] < 1e-5
-        runs.append(r)
-    coarse, fine = runs
     assert fine["runout"] == pytest.approx(coarse["runout"], rel=0.01)
     assert fine["runout_3d"] == pytest.approx(coarse["runout_3d"], rel=0.01)
     with open(EXAMPLE / "mu_i.toml", "rb") as f:  # the baseline's own setting
