@@ -4,6 +4,7 @@
         [--materials mu_i mohr_coulomb] [--friction-angle 22] [--points-per-cell 2]
         [--floor friction|fixed|roller|penalty] [--cfl 0.5] [--t-end 7]
         [--velocity-update apic|flip|aflip] [--flip F | --relaxation-time TAU]
+        [--separation reset|recompact]
 
 Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
 a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
@@ -51,7 +52,7 @@ X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 def case_at(h: float, material: str, friction_angle: float, points_per_cell: int = 2,
             floor: str = "friction", cfl: float = 0.5, t_end: float = 7.0,
             update: str | None = None, flip: float | None = None,
-            relaxation_time: float | None = None) -> dict:
+            relaxation_time: float | None = None, separation: str | None = None) -> dict:
     """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
     twin; n x n x n points a cell; the floor as in mu_i.toml (`friction`, Coulomb 0.466
     on the grid nodes), no-slip (`fixed`), frictionless (`roller`: the mass slides on
@@ -60,7 +61,7 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     reaches two cells below the floor); runs end at t_end tau_c; `update`, `flip` and
     `relaxation_time` replace mu_i.toml's solver.velocity_update, solver.flip and
     solver.velocity_relaxation_time [s] when `update` is given (docs/mpm.md: velocity
-    update)."""
+    update); `separation` replaces the mu(I) material's (docs/mpm.md: mu(I) rheology)."""
     case = tomllib.loads((HERE / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
@@ -76,6 +77,8 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             solver["flip"] = flip
         if relaxation_time is not None:
             solver["velocity_relaxation_time"] = relaxation_time
+    if separation is not None and material == "mu_i":
+        case["materials"]["beads"]["separation"] = separation
     if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
         case["time"]["end"] = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
     for bc in case["boundaries"]:
@@ -108,9 +111,10 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
 
 def variant(points_per_cell: int, floor: str, cfl: float, t_end: float,
             update: str | None = None, flip: float | None = None,
-            relaxation_time: float | None = None) -> str:
+            relaxation_time: float | None = None, separation: str | None = None) -> str:
     """Suffix of a run folder for the non-default options ('' for mu_i.toml's)."""
     return ((f"_n{points_per_cell}" if points_per_cell != 2 else "")
+            + (f"_{separation}" if separation is not None else "")
             + (f"_{update}" if update is not None else "")
             + (f"{flip:g}" if flip is not None else "")
             + (f"_tau{relaxation_time * 1e3:g}ms" if relaxation_time is not None else "")
@@ -243,17 +247,21 @@ def main() -> None:
                     help="FLIP share of --velocity-update flip or aflip")
     ap.add_argument("--relaxation-time", type=float, default=None,
                     help="solver.velocity_relaxation_time [s] of flip or aflip")
+    ap.add_argument("--separation", default=None, choices=["reset", "recompact"],
+                    help="the mu(I) material's separation, instead of mu_i.toml's")
     args = ap.parse_args()
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
         for mm in sorted(args.cells, reverse=True):
+            separation = args.separation if mat == "mu_i" else None
             suffix = variant(args.points_per_cell, args.floor, args.cfl, args.t_end,
-                             args.velocity_update, args.flip, args.relaxation_time)
+                             args.velocity_update, args.flip, args.relaxation_time,
+                             separation)
             out = args.out / f"{mat}_{mm:g}mm{suffix}"
             case = case_at(mm * 1e-3, mat, args.friction_angle, args.points_per_cell,
                            args.floor, args.cfl, args.t_end, args.velocity_update, args.flip,
-                           args.relaxation_time)
+                           args.relaxation_time, separation)
             wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h

@@ -3,6 +3,7 @@ RVE's own measured mu(I).
 
     python examples/column_collapse/cross_scale.py --out DIR [--case quick.toml]
         [--tiles 1] [--pressures 200 800] [--inertial 0.003 ... 0.8] [--multiscale RUN]
+        [--separation reset|recompact]
 
 (a) `grainscale rve flow` on the RVE of the case (default `quick.toml`; same grains,
     contact law and restitution) at the column's pressure range, fitting mu(I) in the
@@ -18,6 +19,9 @@ DIR/results.json; the last printed line is one JSON object with `multiscale_runo
 `continuum_runout` and `baseline_runout` (values at 7 tau_c) and the relative difference
 of the first two. A step already done in DIR (flow.csv, a finished run) is not repeated.
 `--case fine.toml --multiscale RUN` compares a finished run of the 5 mm column.
+`--separation recompact` gives both continua that key (docs/mpm.md: mu(I) rheology;
+their folders, figure and results become DIR/continuum_recompact,
+DIR/baseline_recompact, DIR/cross_scale_recompact.png and DIR/results_recompact.json).
 """
 
 from __future__ import annotations
@@ -125,6 +129,8 @@ def main() -> None:
                     default=[0.003, 0.01, 0.03, 0.1, 0.2, 0.4, 0.8])
     ap.add_argument("--multiscale", type=Path, default=None,
                     help="a finished run of the case to use instead of running it")
+    ap.add_argument("--separation", default=None, choices=["reset", "recompact"],
+                    help="the continua's mu(I) separation (default: the material's own)")
     args = ap.parse_args()
     if not args.case.is_file():
         raise SystemExit(f"--case {args.case}: no such file")
@@ -133,20 +139,22 @@ def main() -> None:
     material = measure_flow(args.case, args.out, args.tiles, args.pressures, args.inertial)
     print(f"(a) fitted mu(I): mu_s {material['mu_s']}, mu_2 {material['mu_2']}, "
           f"I_0 {material['I_0']} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    wall_c = run_one(continuum_case(args.case, material, "mu(I) fitted to its RVE"),
-                     args.out / "continuum")
+    sep = {"separation": args.separation} if args.separation else {}
+    suffix = f"_{args.separation}" if args.separation else ""
+    wall_c = run_one(continuum_case(args.case, material | sep, "mu(I) fitted to its RVE"),
+                     args.out / f"continuum{suffix}")
     print(f"(b) continuum run: {wall_c:.0f} s", flush=True)
     ms = run_multiscale(args.case, args.out, args.multiscale)
     beads = tomllib.loads((HERE / "mu_i.toml").read_text())["materials"]["beads"]
-    wall_b = run_one(continuum_case(args.case, beads, "glass-bead mu(I) of mu_i.toml"),
-                     args.out / "baseline")
+    wall_b = run_one(continuum_case(args.case, beads | sep, "glass-bead mu(I) of mu_i.toml"),
+                     args.out / f"baseline{suffix}")
     print(f"(d) glass-bead baseline run: {wall_b:.0f} s", flush=True)
     hs = {f"multiscale ({args.case.name})": read_history(ms / "history.csv"),
           "mu(I) continuum, fitted to the RVE":
-              read_history(args.out / "continuum" / "run" / "history.csv"),
+              read_history(args.out / f"continuum{suffix}" / "run" / "history.csv"),
           "glass-bead mu(I) (mu_i.toml)":
-              read_history(args.out / "baseline" / "run" / "history.csv")}
-    plot(hs, args.out / "cross_scale.png", args.case.name)
+              read_history(args.out / f"baseline{suffix}" / "run" / "history.csv")}
+    plot(hs, args.out / f"cross_scale{suffix}.png", args.case.name)
     m_ms, m_c, m_b = (measures(h) for h in hs.values())
     result = {"case": args.case.name,
               "multiscale_runout": round(m_ms["runout"], 4),
@@ -159,7 +167,7 @@ def main() -> None:
               "continuum_ke_end_over_peak": round(m_c["kinetic_energy_end_over_peak"], 4),
               "mu_s": material["mu_s"], "mu_2": material["mu_2"], "I_0": material["I_0"],
               "tiles": args.tiles, "wall_s": round(time.perf_counter() - t0)}
-    (args.out / "results.json").write_text(json.dumps(result, indent=1))
+    (args.out / f"results{suffix}.json").write_text(json.dumps(result, indent=1))
     print(json.dumps(result))
 
 if __name__ == "__main__":

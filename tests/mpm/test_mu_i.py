@@ -25,9 +25,10 @@ E, NU = 1e7, 0.3
 P0 = 1e3
 
 
-def _mat(n=1):
+def _mat(n=1, separation="reset"):
     return MuI("beads", n, density=RHO, youngs_modulus=E, poisson_ratio=NU, mu_s=MU_S,
-               mu_2=MU_2, I_0=I_0, grain_diameter=D, grain_density=RHO_S)
+               mu_2=MU_2, I_0=I_0, grain_diameter=D, grain_density=RHO_S,
+               separation=separation)
 
 
 def _mu(I):
@@ -177,6 +178,40 @@ def test_no_tension_and_recompression():
     assert np.all(p > 0)
 
 
+def test_recompact_stays_open_until_the_opened_volume_is_closed():
+    """separation = "recompact": from p0 = 1 kPa an isotropic extension of volumetric
+    strain 3e (3eK > p0) opens the point by phi = 3e - p0/K; shear while open leaves it
+    open (tr = 0); compression in equal steps carries nothing until phi is closed, then
+    p = K (compression beyond phi) exactly (1e-12), where "reset" would already carry
+    K times the whole compression. The opening is shown among the point fields."""
+    mat, reset = _mat(1, "recompact"), _mat(1)
+    K = mat.lam + 2 * mat.G / 3
+    e = 1e-3
+    stresses = [np.tile(-P0 * np.eye(3), (1, 1, 1)) for _ in range(2)]
+    for m, s in zip((mat, reset), stresses, strict=True):
+        m.update(np.diag([e, e, e])[None], 1e-4, s)
+        assert np.all(s == 0.0)
+    phi = 3 * e - P0 / K
+    np.testing.assert_allclose(mat.point_fields()["opening"], [phi], rtol=1e-12)
+    shear = np.zeros((1, 3, 3))
+    shear[0, 0, 2] = 1e-3
+    for m, s in zip((mat, reset), stresses, strict=True):
+        m.update(shear, 1e-4, s)
+    assert np.all(stresses[0] == 0.0) and np.all(stresses[1] == 0.0)  # p_tr = 0: open
+    c = phi / 10.5  # volumetric compression per step: closes within the 11th step
+    step = np.diag([-c / 3] * 3)[None]
+    for n in range(1, 15):
+        for m, s in zip((mat, reset), stresses, strict=True):
+            m.update(step, 1e-4, s)
+        p_recompact, p_reset = _p_tau(stresses[0])[0][0], _p_tau(stresses[1])[0][0]
+        assert p_reset == pytest.approx(K * n * c, rel=1e-12)
+        if n * c < phi:
+            assert np.all(stresses[0] == 0.0) and mat.opening[0] > 0.0
+        else:
+            assert p_recompact == pytest.approx(K * (n * c - phi), rel=1e-12)
+            assert mat.opening[0] == 0.0
+
+
 @pytest.mark.parametrize("flowing", [False, True])
 def test_rigid_rotation_keeps_invariants(flowing):
     """A pure spin increment changes the stress invariants no more than no increment at
@@ -224,13 +259,14 @@ def _roundtrip_h5(tmp_path, state):
     return groups["material_0"]
 
 
-def test_checkpoint_round_trip(tmp_path):
+@pytest.mark.parametrize("separation", ["reset", "recompact"])
+def test_checkpoint_round_trip(tmp_path, separation):
     """state() through an HDF5 checkpoint into a fresh material: the continued runs are
-    bitwise identical, and the point fields come back."""
+    bitwise identical, and the point fields (with "recompact", the opening) come back."""
     n = 4
     gdots = np.array([_gdot_of(I) for I in [0.0, 0.01, 0.1, 1.0]])
     dt = 1e-6
-    mat = _mat(n)
+    mat = _mat(n, separation)
     stress = np.tile(-P0 * np.eye(3), (n, 1, 1))
     dH = np.zeros((n, 3, 3))
     dH[:, 0, 2] = gdots * dt
@@ -239,8 +275,11 @@ def test_checkpoint_round_trip(tmp_path):
         mat.update(dH, dt, stress)
     assert np.all(mat.eps_p[1:] > 0) and np.all(mat.inertial[1:] > 0)
     saved = _roundtrip_h5(tmp_path, mat.state())
-    assert set(saved) == {"plastic_strain", "inertial_number"}
-    other = _mat(n)
+    own = {"opening"} if separation == "recompact" else set()
+    assert set(saved) == {"plastic_strain", "inertial_number"} | own
+    if own:
+        assert saved["opening"][0] > 0  # the separated point is open
+    other = _mat(n, separation)
     other.load_state(saved)
     for k, v in mat.point_fields().items():
         assert np.array_equal(other.point_fields()[k], v), k
@@ -312,9 +351,11 @@ def _load(tmp_path, text):
     return build_state(load_case(p), tmp_path)
 
 
-def test_column_settles_to_lithostatic_stress(tmp_path):
+@pytest.mark.parametrize("separation", ["reset", "recompact"])
+def test_column_settles_to_lithostatic_stress(tmp_path, separation):
     """A 1 m column of beads between frictionless walls on a fixed floor, damped to rest:
-    sigma_zz = -rho g (H - z) within 1 % in every cell below 0.8 H, the base included.
+    sigma_zz = -rho g (H - z) within 1 % in every cell below 0.8 H, the base included,
+    with either way of touching again after a separation (the case key reaches the law).
 
     The weight above a material point does not change as the column settles, so only the
     discretisation errs (1e-4 here; per-cell means as in test_elastic_cases.py, whose
@@ -323,9 +364,10 @@ def test_column_settles_to_lithostatic_stress(tmp_path):
     column must yield while it loads: every point has plastic strain, and at rest no point
     lies above the mu_s cone (the lateral stress rose to K >= 0.54 sigma_zz) or flows.
     """
-    s = _load(tmp_path, CASE)
+    key = f'grain_density = 2450.0\nseparation = "{separation}"'
+    s = _load(tmp_path, CASE.replace("grain_density = 2450.0", key))
     mat = s.materials[0]
-    assert isinstance(mat, KINDS["mu_i"])
+    assert isinstance(mat, KINDS["mu_i"]) and mat.recompact == (separation == "recompact")
     H, h, rho, g = 1.0, 0.1, 1470.0, 9.81
     c = s.wave_speed()
     run(s, 40 * 4 * H / c)  # 40 periods of the column's first mode
@@ -351,6 +393,8 @@ def test_column_settles_to_lithostatic_stress(tmp_path):
     ("grain_diameter = 0.53e-3", "grain_diameter = -1.0",
      ["materials.beads.mu_i.grain_diameter", "-1.0"]),
     ("mu_s = 0.382", "mus = 0.382", ["materials.beads.mu_i.mus", "unknown key"]),
+    ("mu_s = 0.382", 'mu_s = 0.382\nseparation = "memory"',
+     ["materials.beads.mu_i.separation", "memory", "reset", "recompact"]),
 ])
 def test_bad_mu_i_input_is_named(tmp_path, old, new, words):
     assert old in CASE

@@ -142,6 +142,9 @@ class MuICfg(_Elastic):
     I_0: Pos  # -, inertial number where mu is halfway from mu_s to mu_2
     grain_diameter: Pos  # m
     grain_density: Pos  # kg/m^3, solid density of the grains, >= density
+    # how separated grains (zero pressure) touch again: on the first compression, or once
+    # the volume opened while separated is closed (mpm/materials/mu_i.py)
+    separation: Literal["reset", "recompact"] = "reset"
 
     @field_validator("mu_2")
     @classmethod

@@ -1,0 +1,42 @@
+"""examples/column_collapse/flow_state.py: the medians of one frame, against values
+written out by hand for four points."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "column_collapse" / "flow_state.py"
+
+
+def _flow_state():
+    spec = importlib.util.spec_from_file_location("flow_state", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("with_rves", [False, True])
+def test_frame_state_of_four_points(with_rves):
+    """Points 0-2 flow (speed 0.1-0.3 m/s), point 3 rests (0.01 m/s, excluded). Point 1
+    carries no stress: 1/3 stress-free. p medians over 0, 100, 40 Pa: 40; sqrt(J2)/p
+    (q / sqrt 3 / p) over the loaded two only: 0.5 and 0.8, median 0.65."""
+    x = np.array([[0.10, 0, 0], [0.15, 0, 0], [0.21, 0, 0], [0.05, 0, 0]])
+    fields = {
+        "velocity": np.array([[0.1, 0, 0], [0.0, 0.2, 0], [0.0, 0, -0.3], [0.01, 0, 0]]),
+        "p": np.array([100.0, 0.0, 40.0, 500.0]),
+        "q": np.array([0.5 * 100 * math.sqrt(3), 0.0, 0.8 * 40 * math.sqrt(3), 9.0]),
+        "eps_v": np.array([0.1, 0.3, 0.2, 0.0]),
+    }
+    if with_rves:
+        fields["porosity"] = np.array([0.42, 0.60, 0.50, 0.40])
+    r = _flow_state().frame_state(x, fields, 0.05)
+    assert r["front"] == 0.21 and r["flowing"] == 3
+    assert r["stress_free"] == pytest.approx(1 / 3, rel=1e-12)
+    assert r["p"] == 40.0 and r["eps_v"] == pytest.approx(0.2)
+    assert r["sqrt_j2_over_p"] == pytest.approx(0.65, rel=1e-12)
+    assert ("porosity" in r) == with_rves
+    if with_rves:
+        assert r["porosity"] == pytest.approx(0.50)
