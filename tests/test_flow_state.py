@@ -1,5 +1,5 @@
-"""examples/column_collapse/flow_state.py: the medians of one frame, against values
-written out by hand for four points."""
+"""The column's frame measures: flow_state.py's medians of one frame (against values
+written out by hand for four points) and convergence.py's mass quantiles."""
 
 import importlib.util
 import math
@@ -40,3 +40,25 @@ def test_frame_state_of_four_points(with_rves):
     assert ("porosity" in r) == with_rves
     if with_rves:
         assert r["porosity"] == pytest.approx(0.50)
+
+
+def test_mass_runouts_of_the_last_frame(tmp_path):
+    """convergence.py's mass measures read the last frame of a series: 100 points at
+    x = 0.101 ... 0.200 m (L_i = 0.1 m). numpy's linear quantile of x at 0.95 and 0.99 is
+    0.101 + 0.099 q: runout ratios 0.9505 and 0.9901 (1e-12); the first frame, all at
+    the face, is not the one read."""
+    from grainscale.io.vtk import PVDSeries, write_points_vtu
+
+    spec = importlib.util.spec_from_file_location("convergence", SCRIPT.with_name(
+        "convergence.py"))
+    conv = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(conv)
+    series = PVDSeries(tmp_path / "frames.pvd")
+    for k, x in enumerate((np.full(100, 0.1), 0.1 + 0.001 * np.arange(1, 101))):
+        pts = np.zeros((100, 3))
+        pts[:, 0] = x
+        write_points_vtu(tmp_path / f"frame_{k}.vtu", pts, {"p": np.zeros(100)})
+        series.add(0.1 * k, tmp_path / f"frame_{k}.vtu")
+    m = conv.mass_runouts(tmp_path)
+    assert m["runout_mass95"] == pytest.approx((0.101 + 0.099 * 0.95 - 0.1) / 0.1, rel=1e-12)
+    assert m["runout_mass99"] == pytest.approx((0.101 + 0.099 * 0.99 - 0.1) / 0.1, rel=1e-12)

@@ -16,8 +16,10 @@ RVE's own measured mu(I).
     (DIR/baseline), for reference.
 Writes DIR/cross_scale.png (runout and kinetic energy against t / tau_c, every run) and
 DIR/results.json; the last printed line is one JSON object with `multiscale_runout`,
-`continuum_runout` and `baseline_runout` (values at 7 tau_c) and the relative difference
-of the first two. A step already done in DIR (flow.csv, a finished run) is not repeated.
+`continuum_runout` and `baseline_runout` (values at 7 tau_c), the relative difference
+of the first two, and where 95 % and 99 % of the mass of each of them ended
+(`multiscale_runout_mass95`, ...; convergence.py's measure). A step already done in
+DIR (flow.csv, a finished run) is not repeated.
 `--case fine.toml --multiscale RUN` compares a finished run of the 5 mm column.
 `--separation recompact` gives both continua that key (docs/mpm.md: mu(I) rheology;
 their folders, figure and results become DIR/continuum_recompact,
@@ -40,7 +42,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from convergence import experiment_bands, measures, run_one  # noqa: E402
+from convergence import experiment_bands, mass_runouts, measures, run_one  # noqa: E402
 
 from grainscale.io.history import read_history  # noqa: E402
 
@@ -156,11 +158,15 @@ def main() -> None:
               read_history(args.out / f"baseline{suffix}" / "run" / "history.csv")}
     plot(hs, args.out / f"cross_scale{suffix}.png", args.case.name)
     m_ms, m_c, m_b = (measures(h) for h in hs.values())
+    mass_ms, mass_c = (mass_runouts(r) for r in (ms, args.out / f"continuum{suffix}" / "run"))
     result = {"case": args.case.name,
               "multiscale_runout": round(m_ms["runout"], 4),
               "continuum_runout": round(m_c["runout"], 4),
               "baseline_runout": round(m_b["runout"], 4),
               "relative_difference": round(m_ms["runout"] / m_c["runout"] - 1.0, 4),
+              **{f"{who}_{k}": round(v, 4) for who, m in (("multiscale", mass_ms),
+                                                          ("continuum", mass_c))
+                 for k, v in m.items()},
               "multiscale_height_ratio": round(m_ms["height_ratio"], 4),
               "continuum_height_ratio": round(m_c["height_ratio"], 4),
               "multiscale_ke_end_over_peak": round(m_ms["kinetic_energy_end_over_peak"], 4),
