@@ -219,6 +219,9 @@ def plot(results: list[dict], histories: dict, deposits: dict, png: Path) -> Non
         bx.plot([r["cell_mm"] for r in rows], [r["runout_3d"] for r in rows],
                 styles[mat] + "s", color="tab:green", mfc="none",
                 label=f"{rows[0]['label']}: deposit >= 3 beads thick")
+        bx.plot([r["cell_mm"] for r in rows], [r["runout_mass99"] for r in rows],
+                styles[mat] + "^", color="tab:purple", mfc="none",
+                label=f"{rows[0]['label']}: 99 % of the mass")
     bx.set_xscale("log")
     bx.set_xticks(sizes, [f"{mm:g}" for mm in sizes])
     bx.minorticks_off()
