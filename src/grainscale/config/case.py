@@ -173,6 +173,12 @@ class DEMMaterialCfg(StrictModel):
     packings: list[str] = []
     library: Annotated[int, Field(ge=1, le=256)] = 1
     assignment_seed: Annotated[int, Field(ge=0)] = 0  # random packing-to-point assignment
+    # a geostatic library: `library` packings prepared at each of these mean stresses
+    # (Pa, ascending) instead of [rve.preparation] pressure; a point takes a packing of
+    # the level nearest (in log) to its lithostatic mean stress rho g depth (1 + 2 k0) / 3,
+    # depth below the material's highest point (coupling/materials.py)
+    geostatic_pressures: list[Pos] = []
+    geostatic_k0: Annotated[float, Field(gt=0, le=2)] = 0.5  # sigma_h / sigma_v at rest
     time_integration: Literal["dynamic", "quasi_static"] = "dynamic"
     # dynamic RVEs live in real time, where [rve] damping is an artificial viscosity: it
     # defaults to 0 for them and a value above 0 is refused unless allowed here (a
@@ -186,6 +192,13 @@ class DEMMaterialCfg(StrictModel):
     # no RVE grows beyond this multiple of its packing's spheres by retiling
     retile_max_factor: Annotated[int, Field(ge=1, le=64)] = 8
     density: Pos | None = None  # kg/m^3; the packings' bulk density (set by the run)
+
+    @field_validator("geostatic_pressures")
+    @classmethod
+    def _ascending(cls, v):
+        if any(b <= a for a, b in zip(v, v[1:], strict=False)):
+            raise ValueError(f"{v}: must be strictly ascending (Pa)")
+        return v
 
 
 MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg | MuICfg
@@ -395,6 +408,16 @@ def check_case(case: Case) -> None:
         if m.type == "dem" and m.density is not None:
             raise ConfigError(f"materials.{name}.density = {m.density}: a 'dem' material's "
                               "density is that of its packings; remove the key")
+        if m.type == "dem" and m.geostatic_pressures:
+            if m.packings:
+                raise ConfigError(f"materials.{name}.geostatic_pressures = "
+                                  f"{m.geostatic_pressures}: the geostatic library is "
+                                  "generated from [rve]; valid with packings = [] only "
+                                  f"(packings = {m.packings})")
+            if not any(case.solver.gravity):
+                raise ConfigError(f"materials.{name}.geostatic_pressures = "
+                                  f"{m.geostatic_pressures}: needs gravity to give depth "
+                                  f"a stress (solver.gravity = {list(case.solver.gravity)})")
     dynamic = [n for n, m in case.materials.items()
                if m.type == "dem" and m.time_integration == "dynamic"]
     if dynamic and case.rve is not None:

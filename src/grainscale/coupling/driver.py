@@ -110,8 +110,8 @@ def check_geometry(case: Case, case_dir: Path) -> list[Probe]:
         if m.type == "dem":
             m.density = 1.0
 
-    def stand_in(name, cfg, n, local=None):
-        return KINDS["linear_elastic"](name, n, density=1.0, youngs_modulus=1.0,
+    def stand_in(name, cfg, x, local=None):
+        return KINDS["linear_elastic"](name, len(x), density=1.0, youngs_modulus=1.0,
                                        poisson_ratio=0.0)
 
     return resolve(case, build_state(probe, case_dir, material_factory=stand_in))

@@ -4,13 +4,17 @@ A "dem" material needs its packings before the MPM points exist (their mass come
 the packings' bulk density). Packings are read from `materials.NAME.packings` or
 generated from the case's [rve] table (seeds rve.seed, rve.seed + 1, ...) and cached in
 the output folder (`packings/NAME_k.h5`, reused when the [rve] table is unchanged), so a
-resumed or repeated run does not generate them again.
+resumed or repeated run does not generate them again. A geostatic library
+(`geostatic_pressures`) holds `library` packings per pressure level
+(`packings/NAME_pL_k.h5`), and each point takes one of the level that matches its depth.
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from grainscale.config.base import ConfigError
 from grainscale.config.case import Case
@@ -38,7 +42,8 @@ def _generated(params: RVEParams, k: int, cache: Path, progress: bool) -> RVEBat
 
 def packing_library(case: Case, name: str, case_dir: Path, out: Path,
                     progress: bool = True) -> list[RVEBatch]:
-    """The packings of material `name` (each a batch of one RVE)."""
+    """The packings of material `name` (each a batch of one RVE); a geostatic library
+    level by level, `library` packings each, from the lowest pressure up."""
     cfg = case.materials[name]
     if cfg.packings:
         library = []
@@ -49,11 +54,39 @@ def packing_library(case: Case, name: str, case_dir: Path, out: Path,
                                   f"({path})")
             library.append(load_packing(path, case.rve))
         return library
+    levels = cfg.geostatic_pressures
     if progress:
-        print(f"preparing {cfg.library} packing(s) for material {name!r} "
+        at = f" at each of {levels} Pa" if levels else ""
+        print(f"preparing {cfg.library} packing(s){at} for material {name!r} "
               f"({case.rve.particles} spheres each)", file=sys.stderr)
-    return [_generated(case.rve, k, out / "packings" / f"{name}_{k}.h5", progress)
-            for k in range(cfg.library)]
+    if not levels:
+        return [_generated(case.rve, k, out / "packings" / f"{name}_{k}.h5", progress)
+                for k in range(cfg.library)]
+    library = []
+    for level, p in enumerate(levels):
+        prep = case.rve.preparation.model_copy(update={"pressure": p})
+        params = case.rve.model_copy(update={"preparation": prep})
+        library += [_generated(params, k, out / "packings" / f"{name}_p{level}_{k}.h5",
+                               progress) for k in range(cfg.library)]
+    return library
+
+
+def geostatic_assignment(x: np.ndarray, gravity, density: float, k0: float,
+                         pressures: list[float], per_level: int, seed: int) -> np.ndarray:
+    """The packing of each point in a geostatic library (level-major, `per_level`
+    packings a level): one of the level whose pressure is nearest, in log, to the
+    point's lithostatic mean stress p = rho |g| depth (1 + 2 k0) / 3 [Pa] (rho the bulk
+    density [kg/m^3], depth [m] below the highest point along gravity: a flat free
+    surface), drawn at random with `seed`. Points shallower than the lowest level take
+    it."""
+    g = np.asarray(gravity, dtype=float)
+    gn = float(np.linalg.norm(g))
+    height = -(x @ g) / gn
+    p = density * gn * (height.max() - height) * (1 + 2 * k0) / 3
+    logp = np.log(np.maximum(p, pressures[0]))
+    level = np.abs(logp[:, None] - np.log(pressures)[None, :]).argmin(axis=1)
+    rng = np.random.default_rng(seed)
+    return level * per_level + rng.integers(per_level, size=len(x))
 
 
 def check_retile_width(name: str, width: float, library: list[RVEBatch], skin: float
@@ -86,9 +119,15 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
     if not libraries:
         return None
 
-    def factory(name: str, cfg, n_points: int, local=None) -> RVEMaterial:
-        return RVEMaterial(name, case.rve, libraries[name], n_points, local=local,
-                           assignment_seed=cfg.assignment_seed, mode=cfg.time_integration,
+    def factory(name: str, cfg, x: np.ndarray, local=None) -> RVEMaterial:
+        assignment = None
+        if cfg.geostatic_pressures:
+            assignment = geostatic_assignment(x, case.solver.gravity, cfg.density,
+                                              cfg.geostatic_k0, cfg.geostatic_pressures,
+                                              cfg.library, cfg.assignment_seed)
+        return RVEMaterial(name, case.rve, libraries[name], len(x), local=local,
+                           assignment_seed=cfg.assignment_seed, assignment=assignment,
+                           mode=cfg.time_integration,
                            min_substeps=cfg.min_substeps,
                            strain_per_substep=cfg.strain_per_substep,
                            retile_width=cfg.retile_width,

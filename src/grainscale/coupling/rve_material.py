@@ -73,11 +73,13 @@ class RVEMaterial:
                  assignment_seed: int = _DEM.assignment_seed,
                  mode: str = _DEM.time_integration, min_substeps: int = _DEM.min_substeps,
                  strain_per_substep: float = _DEM.strain_per_substep,
-                 local: np.ndarray | None = None, retile_width: float = _DEM.retile_width,
+                 local: np.ndarray | None = None, assignment: np.ndarray | None = None,
+                 retile_width: float = _DEM.retile_width,
                  retile_max_factor: int = _DEM.retile_max_factor, device: str = "cpu"):
         """n_points: points of this material over all ranks; local: the indices (into
         them) of the points this process holds (default: all). The packing of each point
-        is drawn for all points with the seed, so it does not depend on the ranks.
+        is drawn for all points with the seed, so it does not depend on the ranks, or
+        given for all points by `assignment` (indices into library).
         retile_width: cells narrower than this many mean grain diameters are doubled
         (0: never), up to retile_max_factor times the packing's spheres. The defaults
         are those of a case file's "dem" material (config.case.DEMMaterialCfg).
@@ -94,8 +96,10 @@ class RVEMaterial:
         self.retile_width = float(retile_width)
         self.max_particles = int(retile_max_factor) * max(b.n_particles for b in library)
         self.cp = contact_params(params)
-        rng = np.random.default_rng(assignment_seed)
-        self.assignment = rng.integers(len(library), size=n_points)
+        if assignment is None:
+            rng = np.random.default_rng(assignment_seed)
+            assignment = rng.integers(len(library), size=n_points)
+        self.assignment = np.asarray(assignment)
         self.local = local  # for error messages: the material's point numbers
         if local is not None:
             self.assignment = self.assignment[local]

@@ -86,9 +86,9 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
                 owners: np.ndarray | None = None) -> MPMState:
     """The solver state at time.start.
 
-    `material_factory(name, cfg, n_points, local)` may supply materials of types this
-    module does not know (the coupling's DEM material): n_points is the material's
-    number of points over all ranks, local the indices (into those) this rank owns.
+    `material_factory(name, cfg, x, local)` may supply materials of types this module
+    does not know (the coupling's DEM material): x holds the initial positions of the
+    material's points over all ranks, local the indices (into those) this rank owns.
     Under MPI (`comm` with several ranks) every rank builds and checks the whole point
     set, then keeps the points it owns (distributed/partition.py, or `owners`: the rank
     of every point, as rebalancing decides); `state.point_ids` holds their global ids,
@@ -132,7 +132,7 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
             params = cfg.model_dump(exclude={"type"})
             mat = KINDS[cfg.type](name, ids.size, **params)
         elif material_factory is not None:
-            mat = material_factory(name, cfg, everyone.size, local)
+            mat = material_factory(name, cfg, everything.x[everyone], local)
         else:
             raise ConfigError(f"materials.{name}.type = {cfg.type!r}: unknown material type; "
                               f"valid: {sorted(KINDS)}")
