@@ -190,9 +190,10 @@ def run_flow(case: RVECase, args: argparse.Namespace) -> int:
         print(f"no mu(I) fit: {err}")
     for m, f in fits.items():
         bound = f"; {f['warning']}" if f["warning"] else ""
-        print(f"fit of {m}({'I' if m == 'mu' else 'I_p'}): mu_s = {f['mu_s']:.4f}, "
-              f"mu_2 = {f['mu_2']:.4f}, I_0 = {f['I_0']:.4g} (rms {f['rms']:.3g} bands"
-              f"{bound})")
+        print(f"fit of {m}({'I' if m == 'mu' else 'I_p'}): mu_s = {f['mu_s']:.4f} +- "
+              f"{f['mu_s_err']:.2g}, mu_2 = {f['mu_2']:.4f} +- {f['mu_2_err']:.2g}, "
+              f"I_0 = {f['I_0']:.4g} (ln I_0 +- {f['ln_I_0_err']:.2g}; standard errors; "
+              f"rms {f['rms']:.3g} bands{bound})")
     if fits:
         slowest = int(np.argmin(col["I"]))
         table = flow.mu_i_table(args.material, fits["mu"], params, d,

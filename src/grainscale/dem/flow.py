@@ -171,7 +171,9 @@ def fit_mu_i(I, mu, err=None) -> dict:
     The model is linear in (mu_s, mu_2) at a fixed I_0, so those are solved exactly (with
     0 <= mu_s <= mu_2) and I_0 alone is searched: a scan of log I_0 over two decades
     either side of the measured I, then golden-section refinement. Returns mu_s, mu_2,
-    I_0, rms (weighted residual: in units of the bands when err is given) and `warning`,
+    I_0, rms (weighted residual: in units of the bands when err is given), their
+    standard errors mu_s_err, mu_2_err and ln_I_0_err (of ln I_0; from the scatter about
+    the fit, NaN when a parameter is on a bound) and `warning`,
     empty unless a parameter sits on a bound (I_0 at the end of the scan, mu_s = 0 or
     mu_s = mu_2) or I_0 exceeds the largest measured I: the data then do not bracket the
     law's knee and its parameters are not separately determined (measure over a wider
@@ -195,6 +197,7 @@ def fit_mu_i(I, mu, err=None) -> dict:
             a = c
     I_0 = math.exp(0.5 * (a + b))
     mu_s, mu_2, r = _linear_fit(I, mu, w, I_0)
+    errors = _standard_errors(I, w, mu_s, mu_2, I_0, r)
     warning = ("I_0 at the end of its scan" if k in (0, len(grid) - 1) else
                "mu_s at its bound 0" if mu_s == 0.0 else
                "no rate dependence (mu_s = mu_2)" if mu_s == mu_2 else
@@ -202,8 +205,27 @@ def fit_mu_i(I, mu, err=None) -> dict:
                if I_0 > I.max() else "")
     if warning:
         warning += "; the law is not determined by these points: widen the range of I"
+        errors = dict.fromkeys(errors, math.nan)  # no linearisation on a bound
     return {"mu_s": mu_s, "mu_2": mu_2, "I_0": I_0, "rms": math.sqrt(r / len(I)),
-            "warning": warning}
+            "warning": warning, **errors}
+
+
+def _standard_errors(I, w, mu_s, mu_2, I_0, rss) -> dict:
+    """Standard errors of mu_s, mu_2 and ln I_0 from the linearised least squares:
+    cov = s^2 (J^T W^2 J)^-1, s^2 = rss / (n - 3) the weighted residual variance (so the
+    weights need only be relative), J the model's derivatives at the optimum:
+    d mu/d mu_s = 1 - x, d mu/d mu_2 = x, d mu/d ln I_0 = -(mu_2 - mu_s) x (1 - x), with
+    x = I / (I_0 + I). NaN with no residual degree of freedom or a singular J."""
+    nan = {"mu_s_err": math.nan, "mu_2_err": math.nan, "ln_I_0_err": math.nan}
+    if len(I) <= 3:
+        return nan
+    x = I / (I_0 + I)
+    jac = np.stack([1.0 - x, x, -(mu_2 - mu_s) * x * (1.0 - x)], axis=1) * w[:, None]
+    normal = jac.T @ jac
+    if np.linalg.cond(normal) > 1e12:
+        return nan
+    se = np.sqrt(np.diag(np.linalg.inv(normal)) * rss / (len(I) - 3))
+    return dict(zip(nan, map(float, se), strict=True))
 
 
 def mu_i_table(name: str, fit: dict, params: RVEParams, d: float, porosity: float,
@@ -219,6 +241,8 @@ def mu_i_table(name: str, fit: dict, params: RVEParams, d: float, porosity: floa
         f"# mu(I) of the RVE of {source}, fitted by `grainscale rve flow`",
         "# (shear-cell measure: tau_xz / sigma_n against I of sigma_n; rms residual "
         f"{fit['rms']:.3g} bands{bound})",
+        f"# standard errors: mu_s {fit['mu_s_err']:.2g}, mu_2 {fit['mu_2_err']:.2g}, "
+        f"ln I_0 {fit['ln_I_0_err']:.2g}",
         f"[materials.{name}]",
         'type = "mu_i"',
         f"density = {rho:.6g}        # kg/m3: (1 - {porosity:.4f}) x rho_s",
