@@ -197,17 +197,21 @@ def fit_mu_i(I, mu, err=None) -> dict:
             a = c
     I_0 = math.exp(0.5 * (a + b))
     mu_s, mu_2, r = _linear_fit(I, mu, w, I_0)
-    errors = _standard_errors(I, w, mu_s, mu_2, I_0, r)
     warning = ("I_0 at the end of its scan" if k in (0, len(grid) - 1) else
                "mu_s at its bound 0" if mu_s == 0.0 else
                "no rate dependence (mu_s = mu_2)" if mu_s == mu_2 else
                f"I_0 = {I_0:.3g} above the largest measured I: mu_2 is an extrapolation"
                if I_0 > I.max() else "")
-    if warning:
+    if warning:  # no linearisation on a bound
         warning += "; the law is not determined by these points: widen the range of I"
-        errors = dict.fromkeys(errors, math.nan)  # no linearisation on a bound
+        errors = dict.fromkeys(_ERRORS, math.nan)
+    else:
+        errors = _standard_errors(I, w, mu_s, mu_2, I_0, r)
     return {"mu_s": mu_s, "mu_2": mu_2, "I_0": I_0, "rms": math.sqrt(r / len(I)),
             "warning": warning, **errors}
+
+
+_ERRORS = ("mu_s_err", "mu_2_err", "ln_I_0_err")
 
 
 def _standard_errors(I, w, mu_s, mu_2, I_0, rss) -> dict:
@@ -216,7 +220,7 @@ def _standard_errors(I, w, mu_s, mu_2, I_0, rss) -> dict:
     weights need only be relative), J the model's derivatives at the optimum:
     d mu/d mu_s = 1 - x, d mu/d mu_2 = x, d mu/d ln I_0 = -(mu_2 - mu_s) x (1 - x), with
     x = I / (I_0 + I). NaN with no residual degree of freedom or a singular J."""
-    nan = {"mu_s_err": math.nan, "mu_2_err": math.nan, "ln_I_0_err": math.nan}
+    nan = dict.fromkeys(_ERRORS, math.nan)
     if len(I) <= 3:
         return nan
     x = I / (I_0 + I)
@@ -225,7 +229,7 @@ def _standard_errors(I, w, mu_s, mu_2, I_0, rss) -> dict:
     if np.linalg.cond(normal) > 1e12:
         return nan
     se = np.sqrt(np.diag(np.linalg.inv(normal)) * rss / (len(I) - 3))
-    return dict(zip(nan, map(float, se), strict=True))
+    return dict(zip(_ERRORS, map(float, se), strict=True))
 
 
 def mu_i_table(name: str, fit: dict, params: RVEParams, d: float, porosity: float,
