@@ -143,6 +143,18 @@ def test_fixed_window_and_phi_from_file(tmp_path, capsys):
     se_k, se_p0 = se_expected(0.5)
     assert r["K_phi"] == pytest.approx(26.0, abs=4 * se_k)
     assert r["p_0"] == pytest.approx(3.0, abs=4 * se_p0)
+    assert "K_theory_band95" not in r  # no band in the file: none claimed
+
+
+def test_phi_band_from_file_spans_the_law(tmp_path, capsys):
+    """friction_angle.py's band on phi becomes K_theory at both ends of it."""
+    run = write_run(tmp_path / "run", 26.0, 3.0, seed=3)
+    (tmp_path / "phi.json").write_text(json.dumps({"phi_deg": 25.0, "phi_band95_deg": 1.5}))
+    code, out, err = run_main(capsys, [run, "--phi-from", tmp_path / "phi.json"])
+    assert code == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert r["K_theory_band95"] == [pytest.approx(k_phi(23.5)), pytest.approx(k_phi(26.5))]
+    assert "K_theory" in out.splitlines()[-2]
 
 
 def test_missing_column_names_file_and_column(tmp_path, capsys):

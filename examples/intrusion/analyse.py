@@ -44,7 +44,9 @@ reaction's ripple with depth is correlated, so read them as lower bounds.
 Theory: K_theory = k_phi(phi) from grainscale.theory.archimedes (seed Eq. 27-29, Kang et
 al. 2018, Eq. 29c without the printed inner R), phi the friction angle measured on the
 RVE (--phi, or --phi-from a JSON file with {"phi_deg": ...}). Each fitted slope is also
-turned into the angle it implies (phi_for_k).
+turned into the angle it implies (phi_for_k). Where the JSON also gives the angle's 95 %
+band ("phi_band95_deg", as friction_angle.py writes it), the summary adds K_theory at
+its two ends (`K_theory_band95`): the range of the law that the measured angle allows.
 
 Writes a plot (--png, default OUT/intrusion.png of the first run): p_u/(rho g R) against
 d/R for every run, each fit over its window, and the theory line K_theory d/R + p_0 (p_0
@@ -55,6 +57,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tomllib
 from pathlib import Path
@@ -157,7 +160,8 @@ def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
 
 
 def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
-            tol: float = 0.002, min_span: float = 0.4, png: Path | None = None) -> dict:
+            tol: float = 0.002, min_span: float = 0.4, png: Path | None = None,
+            phi_band: float | None = None) -> dict:
     runs = [load_run(o) for o in outs]
     k_theory = k_phi(phi_deg)
     results = []
@@ -185,6 +189,10 @@ def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
                "phi_implied_deg": first["phi_implied_deg"],
                "depth_over_R_max": first["depth_over_R_max"], "window": first["window"],
                "runs": results}
+    if phi_band is not None and math.isfinite(phi_band):
+        # the law is steep in phi: the angle's own uncertainty spans this range of K
+        summary["phi_band95_deg"] = phi_band
+        summary["K_theory_band95"] = [k_phi(phi_deg - phi_band), k_phi(phi_deg + phi_band)]
     if len(results) >= 2:
         summary["slope_ratio"] = results[1]["K_phi"] / first["K_phi"]
     png = png if png is not None else outs[0] / "intrusion.png"
@@ -230,6 +238,10 @@ def table(summary: dict) -> str:
     lines.append(f"modified Archimedes law at phi = {summary['phi_deg']:g} deg: "
                  f"K_theory = {summary['K_theory']:.3f} (first run / theory = "
                  f"{summary['K_phi_over_theory']:.3f})")
+    if "K_theory_band95" in summary:
+        lo, hi = summary["K_theory_band95"]
+        lines.append(f"  phi's 95 % band +-{summary['phi_band95_deg']:g} deg: K_theory "
+                     f"{lo:.3f} to {hi:.3f}")
     if "slope_ratio" in summary:
         lines.append(f"slope ratio (second / first run): {summary['slope_ratio']:.4f}")
     if any(r["window_rule"] == "fallback" for r in summary["runs"]):
@@ -238,14 +250,16 @@ def table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def read_phi(path: Path) -> float:
+def read_phi(path: Path) -> tuple[float, float | None]:
+    """phi_deg and, where the file gives it, phi_band95_deg (friction_angle.py's JSON)."""
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as err:
         raise InputError(f"{path}: {err}") from None
     if not isinstance(data, dict) or "phi_deg" not in data:
         raise InputError(f"{path}: missing key 'phi_deg'")
-    return float(data["phi_deg"])
+    band = data.get("phi_band95_deg")
+    return float(data["phi_deg"]), (None if band is None else float(band))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -263,8 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--png", type=Path, default=None, help="default OUT/intrusion.png")
     args = ap.parse_args(argv)
     try:
-        phi = args.phi if args.phi is not None else read_phi(args.phi_from)
-        summary = analyse(args.outs, phi, args.start, args.tol, args.min_span, args.png)
+        phi, band = (args.phi, None) if args.phi is not None else read_phi(args.phi_from)
+        summary = analyse(args.outs, phi, args.start, args.tol, args.min_span, args.png,
+                          band)
     except (InputError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -1,16 +1,29 @@
 """The friction angle of an intrusion case's RVE, for the modified Archimedes law.
 
-    python examples/intrusion/friction_angle.py CASE.toml RUN --out phi.json [--from 0.1]
+    python examples/intrusion/friction_angle.py CASE.toml RUN --out phi.json
+    python examples/intrusion/friction_angle.py CASE.toml --realisations 16 --out phi.json
 
-Runs `grainscale rve triaxial CASE.toml` (drained, at the case's [triaxial] confining
-pressure and rate) on every packing the run used (RUN/packings/*.h5) and takes the
-mobilised friction angle phi = asin((sigma_1 - sigma_3)/(sigma_1 + sigma_3)), with
-sigma_3 the mean lateral stress, over the axial strains from `--from` to the end: the
-steady (critical-state) part of the test, the analogue of a repose angle, which is the
-angle Kang et al.'s law is written for. Small RVEs give noisy paths, so the angle is
-the mean over the window and all packings, with a 95 % band from the per-packing means
-(Student t); the peak of each path is reported beside it. Writes phi.json
-({"phi_deg": ..., ...}, the input of analyse.py --phi-from) and prints it.
+Drained triaxial compression of RVE packings (the case's [triaxial] table: confining
+pressure, rate, axial strain), one batch per loading axis (`--axes`, default x y z: the
+three axes of one packing sample its fabric three ways). The mobilised angle
+phi = asin((sigma_1 - sigma_3)/(sigma_1 + sigma_3)), sigma_1 the axial and sigma_3 the
+mean lateral stress, is averaged over axial strains from `--from` to the end: the steady
+(critical-state) part of the test, the analogue of a repose angle, which is the angle
+Kang et al.'s law is written for. The peak of each path is reported beside it.
+
+Which packings:
+- RUN: the ones the run used (RUN/packings/*.h5). A geostatic library's packings
+  (NAME_pL_k.h5) are each tested at their own level's pressure (from
+  RUN/case.resolved.toml), and the angle is also given per level.
+- `--realisations N`: N packings generated from the case's [rve] table with seeds
+  rve.seed, rve.seed + 1, ... (the first `library` of them are the packings a run
+  without a geostatic library uses), cached next to --out: the angle of the RVE recipe,
+  not of the few packings one run draws.
+
+A packing's sample is its mean over the axes; phi is the mean over packings with a 95 %
+band from their spread (Student t), the half-width of the interval in which the recipe's
+mean angle lies. Writes phi.json ({"phi_deg": ..., "phi_band95_deg": ..., ...}, the
+input of analyse.py --phi-from) and prints it.
 """
 
 from __future__ import annotations
@@ -18,64 +31,163 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
+import re
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from grainscale.io.history import read_history
+from grainscale.config.case import load_rve_case
+from grainscale.dem import element_tests, engine
+from grainscale.dem.generate import contact_params, generate
+from grainscale.dem.state import concatenate
+from grainscale.io.packing import load_packing
+from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
-T95 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306}
+AXES = {"x": 0, "y": 1, "z": 2}
+# two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
+T95 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
+       2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064,
+       2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
 
 
+def t95(dof: int) -> float:
+    """Student t, 95 % two-sided; beyond 30 dof 1.96 + 2.5/dof (within 0.1 % there)."""
+    return T95[dof - 1] if dof <= len(T95) else 1.96 + 2.5 / dof
 
 
-def mobilised_angle(h: dict[str, np.ndarray]) -> np.ndarray:
-    """phi [deg] along a triaxial path (stresses compression positive)."""
-    s1 = h["sigma_zz"]
-    s3 = 0.5 * (h["sigma_xx"] + h["sigma_yy"])
+def mobilised_angle(rows: list[dict[str, float]], axis: str) -> np.ndarray:
+    """phi [deg] along a triaxial path along `axis` (stresses compression positive)."""
+    names = ("sigma_xx", "sigma_yy", "sigma_zz")
+    a = AXES[axis]
+    s1 = np.array([r[names[a]] for r in rows])
+    s3 = 0.5 * sum(np.array([r[names[k]] for r in rows]) for k in range(3) if k != a)
     return np.degrees(np.arcsin((s1 - s3) / (s1 + s3)))
 
 
-def main() -> None:
+def run_packings(run: Path) -> list[tuple[Path, float | None]]:
+    """(packing, its geostatic level's pressure or None) for every packing of a run."""
+    packings = sorted((run / "packings").glob("*.h5"))
+    if not packings:
+        raise SystemExit(f"{run / 'packings'}: no packings (*.h5); run the case first")
+    resolved = run / "case.resolved.toml"
+    materials = tomllib.loads(resolved.read_text())["materials"] if resolved.is_file() else {}
+    out = []
+    for p in packings:
+        m = re.fullmatch(r"(.+)_p(\d+)_\d+", p.stem)
+        if m is None:
+            out.append((p, None))
+            continue
+        levels = materials.get(m.group(1), {}).get("geostatic_pressures")
+        if not levels:
+            raise SystemExit(f"{p}: a geostatic packing, but {resolved} gives no "
+                             f"materials.{m.group(1)}.geostatic_pressures")
+        out.append((p, float(levels[int(m.group(2))])))
+    return out
+
+
+def realisations(params, n: int, folder: Path) -> list[Path]:
+    """n packings of the [rve] recipe with seeds seed .. seed + n - 1, cached in folder."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for k in range(n):
+        p = params.model_copy(update={"seed": params.seed + k})
+        path = folder / f"packing_{k}.h5"
+        key = p.model_dump(mode="json")
+        if not (path.is_file() and read_rve_state(path)[1] == key):
+            print(f"generating packing {k} (seed {p.seed})", file=sys.stderr, flush=True)
+            write_rve_state(path, generate(p), key)
+        paths.append(path)
+    return paths
+
+
+def steady_angles(paths: list[Path], params, test, axes: list[str], start: float):
+    """Steady and peak angles [deg], arrays (packings, axes), of the packings tested
+    together as one batch per axis at test.confining_pressure."""
+    batch = concatenate([load_packing(p, params) for p in paths])
+    steady = np.empty((len(paths), len(axes)))
+    peak = np.empty_like(steady)
+    for j, axis in enumerate(axes):
+        b = batch.copy()
+        engine.refresh(b, contact_params(params))
+        per_rve = element_tests.triaxial(b, params, test.model_copy(update={"axis": axis}),
+                                         every_rve=True)
+        for i, rows in enumerate(per_rve):
+            phi = mobilised_angle(rows, axis)
+            window = np.array([r["axial_strain"] for r in rows]) >= start
+            if window.sum() < 5:
+                raise SystemExit(f"fewer than 5 rows beyond axial strain {start}: "
+                                 f"raise [triaxial] axial_strain or lower --from")
+            steady[i, j] = phi[window].mean()
+            peak[i, j] = phi.max()
+    return steady, peak
+
+
+def summary(samples: np.ndarray) -> tuple[float, float]:
+    """Mean and 95 % half-band (Student t over the samples; NaN for one sample)."""
+    n = len(samples)
+    if n < 2:
+        return float(samples.mean()), math.nan
+    return float(samples.mean()), t95(n - 1) * float(samples.std(ddof=1)) / math.sqrt(n)
+
+
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("case", type=Path)
-    ap.add_argument("run", type=Path, help="output folder of a run of the case")
+    ap.add_argument("run", type=Path, nargs="?", help="output folder of a run of the case")
+    ap.add_argument("--realisations", type=int, metavar="N",
+                    help="test N packings generated from the case's [rve] table instead")
+    ap.add_argument("--axes", nargs="+", choices=list(AXES), default=["x", "y", "z"])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--from", dest="start", type=float, default=0.1,
                     help="axial strain where the steady window starts")
-    args = ap.parse_args()
-    packings = sorted((args.run / "packings").glob("*.h5"))
-    if not packings:
-        raise SystemExit(f"{args.run / 'packings'}: no packings (*.h5); run the case first")
-    means, peaks = [], []
-    for k, pack in enumerate(packings):
-        csv = args.out.with_name(f"{args.out.stem}_triaxial_{k}.csv")
-        if not csv.is_file():
-            subprocess.run([sys.executable, "-m", "grainscale", "rve", "triaxial",
-                            str(args.case), "--packing", str(pack), "--out", str(csv),
-                            "--quiet"], check=True)
-        h = read_history(csv)
-        phi = mobilised_angle(h)
-        window = h["axial_strain"] >= args.start
-        if window.sum() < 5:
-            raise SystemExit(f"{csv}: fewer than 5 rows beyond axial strain {args.start}")
-        means.append(float(phi[window].mean()))
-        peaks.append(float(phi.max()))
-        print(f"{pack.name}: steady phi {means[-1]:.2f} deg (axial strain >= {args.start}), "
-              f"peak {peaks[-1]:.2f} deg", flush=True)
-    n = len(means)
-    band = T95[n - 1] * float(np.std(means, ddof=1)) / math.sqrt(n) if n > 1 else math.nan
-    result = {"phi_deg": round(float(np.mean(means)), 2), "phi_band95_deg": round(band, 2),
-              "phi_per_packing_deg": [round(m, 2) for m in means],
-              "peak_phi_deg": [round(p, 2) for p in peaks],
-              "method": f"drained triaxial at the case's [triaxial] confining pressure, mean "
-                        f"mobilised angle for axial strain >= {args.start}, all packings",
-              "case": str(args.case), "packings": [p.name for p in packings]}
+    args = ap.parse_args(argv)
+    if (args.run is None) == (args.realisations is None):
+        ap.error("give either RUN or --realisations N")
+    if args.realisations is not None and args.realisations < 1:
+        ap.error(f"--realisations = {args.realisations}: must be at least 1")
+    case = load_rve_case(args.case)
+    if case.triaxial is None:
+        raise SystemExit(f"{args.case}: no [triaxial] table (confining pressure, rate, strain)")
+    if args.realisations is not None:
+        folder = args.out.with_name(f"{args.out.stem}_packings")
+        tested = [(p, None) for p in realisations(case.rve, args.realisations, folder)]
+        what = f"{args.realisations} packings of the [rve] recipe (seeds {case.rve.seed}..)"
+    else:
+        tested = run_packings(args.run)
+        what = f"the {len(tested)} packings of {args.run}"
+    by_pressure: dict[float, list[int]] = {}
+    for i, (_, level) in enumerate(tested):
+        by_pressure.setdefault(level or case.triaxial.confining_pressure, []).append(i)
+    steady = np.empty((len(tested), len(args.axes)))
+    peak = np.empty_like(steady)
+    for pressure, idx in sorted(by_pressure.items()):
+        print(f"triaxial at {pressure:g} Pa: {len(idx)} packing(s) x axes {args.axes}",
+              file=sys.stderr, flush=True)
+        test = case.triaxial.model_copy(update={"confining_pressure": pressure})
+        steady[idx], peak[idx] = steady_angles([tested[i][0] for i in idx], case.rve, test,
+                                               args.axes, args.start)
+    phi, band = summary(steady.mean(axis=1))
+    peak_mean, peak_band = summary(peak.mean(axis=1))
+    result = {
+        "phi_deg": round(phi, 2), "phi_band95_deg": round(band, 2),
+        "peak_phi_deg": round(peak_mean, 2), "peak_phi_band95_deg": round(peak_band, 2),
+        "phi_per_axis_deg": {a: round(float(steady[:, j].mean()), 2)
+                             for j, a in enumerate(args.axes)},
+        "phi_per_packing_deg": [round(float(m), 2) for m in steady.mean(axis=1)],
+        "peak_phi_per_packing_deg": [round(float(m), 2) for m in peak.mean(axis=1)],
+        "method": f"drained triaxial along {' '.join(args.axes)}, mean mobilised angle for "
+                  f"axial strain >= {args.start}; {what}",
+        "case": str(args.case), "packings": [p.name for p, _ in tested]}
+    if len(by_pressure) > 1:
+        result["phi_per_level_deg"] = {
+            f"{p:g}": [round(v, 2) for v in summary(steady[idx].mean(axis=1))]
+            for p, idx in sorted(by_pressure.items())}
     args.out.write_text(json.dumps(result, indent=1))
     print(json.dumps(result))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
