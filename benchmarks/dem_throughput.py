@@ -79,21 +79,30 @@ def thread_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: in
 
 @numba.njit(parallel=True)
 def _contiguous_batch(nsteps, law, st, ctl, status, out):
-    """kernel.advance_batch as it was: prange's contiguous blocks of RVEs per thread."""
+    """Scheduling variant: prange's equal blocks of RVEs per thread, whatever they cost."""
     for r in numba.prange(st.s.shape[0]):
         status[r] = kernel.advance_rve(nsteps[r], law, kernel.rve_state(st, r),
                                        kernel.rve_controls(ctl, r), out[r])
 
 
-def skewed_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: int,
-                 cores: int) -> dict[str, float]:
-    """Wall times [s] on `cores` threads of a batch whose first quarter takes 8 x the steps
-    of the rest (the costly quasi-static RVEs near an intruder are neighbouring points):
-    kernel.advance_batch (RVEs dealt to threads in turn, costliest first) against
-    contiguous blocks, and the ideal (1-thread time / cores). Best of 2, same state."""
+@numba.njit(parallel=True)
+def _dealt_batch(nsteps, law, st, ctl, status, out, nthr):
+    """Scheduling variant: RVEs dealt to the threads in turn, costliest first, so that
+    neighbours in memory run on different threads."""
+    order = np.argsort(-nsteps, kind="mergesort")
+    for t in numba.prange(nthr):
+        for k in range(t, st.s.shape[0], nthr):
+            r = order[k]
+            status[r] = kernel.advance_rve(nsteps[r], law, kernel.rve_state(st, r),
+                                           kernel.rve_controls(ctl, r), out[r])
+
+
+def schedule_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, nsteps: np.ndarray,
+                   cores: int) -> dict[str, float]:
+    """Wall times [s] on `cores` threads of a batch advancing nsteps[r] steps per RVE:
+    kernel.advance_batch (contiguous ranges of equal cost per thread) against the two
+    variants above, and the ideal (1-thread time / cores). Best of 2, same state."""
     r = batch.n_rve
-    nsteps = np.full(r, steps, np.int64)
-    nsteps[: r // 4] *= 8
     ctrl = shear_control(batch)
     engine.advance(batch, 10, dt, cp, ctrl)
     law = engine.contact_law(cp)
@@ -101,21 +110,21 @@ def skewed_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, steps: in
                           np.zeros((r, 3, 3)), ctrl.hdot_fixed, ctrl.l_ctrl, ctrl.servo_mask,
                           ctrl.servo_target, float(ctrl.servo_gain), ctrl.max_rate)
 
-    def best(fn) -> float:
+    def best(fn, *extra) -> float:
         t = np.inf
         for _ in range(2):
             b = batch.copy()
             status, out = np.zeros(r, np.int64), np.zeros((r, 5))
             t0 = time.perf_counter()
-            fn(nsteps, law, engine.rve_arrays(b), ctl, status, out)
+            fn(nsteps, law, engine.rve_arrays(b), ctl, status, out, *extra)
             t = min(t, time.perf_counter() - t0)
         return t
 
     numba.set_num_threads(1)
     one = best(kernel.advance_batch)
     numba.set_num_threads(cores)
-    return {"dealt": best(kernel.advance_batch), "contiguous": best(_contiguous_batch),
-            "ideal": one / cores}
+    return {"split": best(kernel.advance_batch), "dealt": best(_dealt_batch, cores),
+            "blocks": best(_contiguous_batch), "ideal": one / cores}
 
 
 def cuda_throughput(base: RVEBatch, cp: engine.ContactParams, dt: float, rves: int,
@@ -253,13 +262,21 @@ def main() -> None:
     print(f"\nbatch of {args.big_batch} RVEs x {n} spheres, {gsteps} steps: "
           f"{ns_batch:.1f} core-ns/particle-step on 1 thread, parallel efficiency "
           f"{eff_batch:.3f} on {cores} threads")
-    # uneven work per RVE (quasi-static RVEs), the scheduling of kernel.advance_batch
-    sk = skewed_times(decorrelated_batch(base, 16, rng), cp, dt, 10 if args.quick else 50,
-                      cores)
-    print(f"\nbatch of 16 RVEs, the first 4 taking 8 x the steps, on {cores} threads: "
-          f"efficiency {sk['ideal'] / sk['dealt']:.3f} dealt costliest first, "
-          f"{sk['ideal'] / sk['contiguous']:.3f} in contiguous blocks "
-          f"(time ratio {sk['contiguous'] / sk['dealt']:.2f})")
+    # scheduling of kernel.advance_batch: equal work per RVE (dynamic RVEs), and uneven
+    # work (quasi-static RVEs near an intruder: a quarter of the batch, side by side,
+    # taking 8 x the steps); calls of 11 steps, as an MPM step makes of a dynamic RVE
+    sched, nr = {}, big.n_rve
+    for name, mult in (("equal", np.ones(nr, np.int64)),
+                       ("skewed", np.r_[np.full(nr // 4, 8), np.ones(nr - nr // 4, np.int64)])):
+        sched[name] = schedule_times(big, cp, dt, 11 * mult, cores)
+    print(f"\nscheduling, batch of {big.n_rve} RVEs on {cores} threads, parallel "
+          f"efficiency (ideal / time):")
+    print(f"{'work per RVE':>24} {'ranges of equal cost':>21} {'dealt in turn':>14} "
+          f"{'equal blocks':>13}")
+    for name, label in (("equal", "equal"), ("skewed", f"first {nr // 4} take 8 x")):
+        t = sched[name]
+        print(f"{label:>24} {t['ideal'] / t['split']:>21.3f} {t['ideal'] / t['dealt']:>14.3f} "
+              f"{t['ideal'] / t['blocks']:>13.3f}")
     print(json.dumps({
         "ns_per_particle_step": round(ns_default, 2), "parallel_efficiency": round(eff, 3),
         "ns_per_particle_step_batch": round(ns_batch, 2), "batch_rves": args.big_batch,
@@ -268,8 +285,9 @@ def main() -> None:
         "bytes_per_particle": round(mem / (args.batch * n)),
         "skin_variants_ns": {str(s): round(v, 2) for s, v, _ in rows},
         "restitution_0.9_ns": round(ns_e, 2),
-        "skewed_efficiency_dealt": round(sk["ideal"] / sk["dealt"], 3),
-        "skewed_efficiency_contiguous": round(sk["ideal"] / sk["contiguous"], 3),
+        "scheduling_efficiency": {
+            name: {v: round(t["ideal"] / t[v], 3) for v in ("split", "dealt", "blocks")}
+            for name, t in sched.items()},
         "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
     }))
 

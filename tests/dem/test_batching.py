@@ -6,7 +6,7 @@ import numba
 import numpy as np
 from dem_helpers import agitated_dense_state, insert_spheres
 
-from grainscale.dem import engine
+from grainscale.dem import engine, kernel
 from grainscale.dem.state import concatenate, from_packing
 
 FIELDS = ("h", "s", "v", "w", "rot", "stress", "stiffness", "force", "torque", "L",
@@ -130,3 +130,25 @@ def test_run_with_servo_does_not_depend_on_call_chunking():
     engine.advance(c, 200, dt, p, ctrl)
     engine.advance(c, 200, dt, p, ctrl)
     _assert_equal(a, c)
+
+
+def test_threads_take_contiguous_ranges_of_equal_cost():
+    """kernel.split_by_cost: the ranges tile the batch in order, and every thread's cost
+    (nsteps + 1 per RVE) is within one RVE's cost of the total over the threads, however
+    the costly RVEs are placed; an RVE too costly to share leaves the others to the
+    remaining threads."""
+    rng = np.random.default_rng(1)
+    cases = [np.full(480, 11), np.array([8] * 4 + [1] * 12), rng.integers(0, 1000, 97),
+             np.r_[np.zeros(50, int), np.full(10, 400)], np.array([100, 0, 0, 0])]
+    for nsteps in cases:
+        nsteps = nsteps.astype(np.int64)
+        cost = nsteps + 1
+        for nthr in (1, 2, 3, 8):
+            b = kernel.split_by_cost(nsteps, nthr)
+            assert b[0] == 0 and b[-1] == len(nsteps) and np.all(np.diff(b) >= 0)
+            share = np.array([cost[b[t]:b[t + 1]].sum() for t in range(nthr)])
+            assert share.sum() == cost.sum()
+            # cut t sits at the prefix sum nearest t/nthr of the total: each cut is off by
+            # at most half an RVE's cost, so each share by at most one RVE's cost
+            assert np.all(np.abs(share - cost.sum() / nthr) <= cost.max()), (nsteps, nthr)
+    assert list(kernel.split_by_cost(np.full(480, 11, np.int64), 2)) == [0, 240, 480]
