@@ -39,11 +39,11 @@ from pathlib import Path
 import numpy as np
 
 from grainscale.config.case import load_rve_case
+from grainscale.coupling.materials import cached_packing
 from grainscale.dem import element_tests, engine
-from grainscale.dem.generate import contact_params, generate
+from grainscale.dem.generate import contact_params
 from grainscale.dem.state import concatenate
 from grainscale.io.packing import load_packing
-from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
 AXES = {"x": 0, "y": 1, "z": 2}
 # two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
@@ -88,17 +88,11 @@ def run_packings(run: Path) -> list[tuple[Path, float | None]]:
 
 
 def realisations(params, n: int, folder: Path) -> list[Path]:
-    """n packings of the [rve] recipe with seeds seed .. seed + n - 1, cached in folder."""
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for k in range(n):
-        p = params.model_copy(update={"seed": params.seed + k})
-        path = folder / f"packing_{k}.h5"
-        key = p.model_dump(mode="json")
-        if not (path.is_file() and read_rve_state(path)[1] == key):
-            print(f"generating packing {k} (seed {p.seed})", file=sys.stderr, flush=True)
-            write_rve_state(path, generate(p), key)
-        paths.append(path)
+    """n packings of the [rve] recipe with seeds seed .. seed + n - 1 (the first ones are
+    a run's library), cached in folder."""
+    paths = [folder / f"packing_{k}.h5" for k in range(n)]
+    for k, path in enumerate(paths):
+        cached_packing(params, k, path, progress=True)
     return paths
 
 

@@ -26,7 +26,9 @@ from grainscale.io.packing import load_packing
 from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
 
-def _generated(params: RVEParams, k: int, cache: Path, progress: bool) -> RVEBatch:
+def cached_packing(params: RVEParams, k: int, cache: Path, progress: bool) -> RVEBatch:
+    """Packing k of the [rve] recipe (seed params.seed + k), read from `cache` if it holds
+    that recipe's packing, else generated and written there."""
     p = params.model_copy(update={"seed": params.seed + k})
     key = p.model_dump(mode="json")
     if cache.is_file():
@@ -60,13 +62,13 @@ def packing_library(case: Case, name: str, case_dir: Path, out: Path,
         print(f"preparing {cfg.library} packing(s){at} for material {name!r} "
               f"({case.rve.particles} spheres each)", file=sys.stderr)
     if not levels:
-        return [_generated(case.rve, k, out / "packings" / f"{name}_{k}.h5", progress)
+        return [cached_packing(case.rve, k, out / "packings" / f"{name}_{k}.h5", progress)
                 for k in range(cfg.library)]
     library = []
     for level, p in enumerate(levels):
         prep = case.rve.preparation.model_copy(update={"pressure": p})
         params = case.rve.model_copy(update={"preparation": prep})
-        library += [_generated(params, k, out / "packings" / f"{name}_p{level}_{k}.h5",
+        library += [cached_packing(params, k, out / "packings" / f"{name}_p{level}_{k}.h5",
                                progress) for k in range(cfg.library)]
     return library
 
