@@ -53,9 +53,12 @@ X_EXTENT, Z_EXTENT = 0.32, 0.07  # m, the grid of mu_i.toml
 def case_at(h: float, material: str, friction_angle: float, points_per_cell: int = 2,
             floor: str = "friction", cfl: float = 0.5, t_end: float = 7.0,
             update: str | None = None, flip: float | None = None,
-            relaxation_time: float | None = None, separation: str | None = None) -> dict:
-    """mu_i.toml with cells of h metres (and a slice one cell thick), or its Mohr-Coulomb
-    twin; n x n x n points a cell; the floor as in mu_i.toml (`friction`, Coulomb 0.466
+            relaxation_time: float | None = None, separation: str | None = None,
+            nonlocal_amplitude: float = 0.48, fluidity_time: float = 1e-4) -> dict:
+    """mu_i.toml with cells of h metres (and a slice one cell thick), its Mohr-Coulomb
+    twin, or its nonlocal twin (`nonlocal_mu_i`, the same beads with amplitude A and
+    fluidity time t_0; docs/mpm.md: nonlocal mu(I)); n x n x n points a cell; the floor
+    as in mu_i.toml (`friction`, Coulomb 0.466
     on the grid nodes), no-slip (`fixed`), frictionless (`roller`: the mass slides on
     and leaves the grid, compare at early times), or a rigid box under z = 0 with the penalty
     contact and the same friction (`penalty`, docs/mpm.md: rigid body; the grid then
@@ -78,7 +81,11 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             solver["flip"] = flip
         if relaxation_time is not None:
             solver["velocity_relaxation_time"] = relaxation_time
-    if separation is not None and material == "mu_i":
+    if material == "nonlocal_mu_i":
+        case["materials"]["beads"].update(type="nonlocal_mu_i",
+                                          nonlocal_amplitude=nonlocal_amplitude,
+                                          fluidity_time=fluidity_time)
+    if separation is not None and material in ("mu_i", "nonlocal_mu_i"):
         case["materials"]["beads"]["separation"] = separation
     if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
         case["time"]["end"] = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
@@ -192,7 +199,7 @@ def experiment_bands(ax) -> None:
 
 def plot(results: list[dict], histories: dict, deposits: dict, png: Path) -> None:
     fig, (ax, bx, cx) = plt.subplots(1, 3, figsize=(16, 4.2))
-    styles = {"mu_i": "-", "mohr_coulomb": "--"}
+    styles = {"mu_i": "-", "mohr_coulomb": "--", "nonlocal_mu_i": ":"}
     sizes = sorted({r["cell_mm"] for r in results}, reverse=True)
     colours = dict(zip(sizes, plt.cm.viridis(np.linspace(0.0, 0.85, len(sizes))), strict=True))
     for r in results:
@@ -248,7 +255,11 @@ def main() -> None:
     ap.add_argument("--cells", type=float, nargs="+", default=[10.0, 5.0, 2.5, 1.25],
                     help="cell sizes in mm")
     ap.add_argument("--materials", nargs="+", default=["mu_i", "mohr_coulomb"],
-                    choices=["mu_i", "mohr_coulomb"])
+                    choices=["mu_i", "mohr_coulomb", "nonlocal_mu_i"])
+    ap.add_argument("--nonlocal-amplitude", type=float, default=0.48,
+                    help="A of nonlocal_mu_i (Henann & Kamrin's glass beads: 0.48)")
+    ap.add_argument("--fluidity-time", type=float, default=1e-4,
+                    help="t_0 [s] of nonlocal_mu_i")
     ap.add_argument("--friction-angle", type=float, default=22.0,
                     help="Mohr-Coulomb friction angle (deg)")
     ap.add_argument("--points-per-cell", type=int, default=2, help="n: n^3 points a cell")
@@ -267,16 +278,18 @@ def main() -> None:
     args = ap.parse_args()
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
-        label = "mu(I)" if mat == "mu_i" else f"Mohr-Coulomb {args.friction_angle:g} deg"
+        label = {"mu_i": "mu(I)", "nonlocal_mu_i": "nonlocal mu(I)"}.get(
+            mat, f"Mohr-Coulomb {args.friction_angle:g} deg")
         for mm in sorted(args.cells, reverse=True):
-            separation = args.separation if mat == "mu_i" else None
+            separation = args.separation if mat != "mohr_coulomb" else None
             suffix = variant(args.points_per_cell, args.floor, args.cfl, args.t_end,
                              args.velocity_update, args.flip, args.relaxation_time,
                              separation)
             out = args.out / f"{mat}_{mm:g}mm{suffix}"
             case = case_at(mm * 1e-3, mat, args.friction_angle, args.points_per_cell,
                            args.floor, args.cfl, args.t_end, args.velocity_update, args.flip,
-                           args.relaxation_time, separation)
+                           args.relaxation_time, separation, args.nonlocal_amplitude,
+                           args.fluidity_time)
             wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h

@@ -164,6 +164,15 @@ class MuICfg(_Elastic):
         return v
 
 
+class NonlocalMuICfg(MuICfg):
+    """mu(I) with nonlocal granular fluidity (Henann & Kamrin 2013; mpm/materials/
+    fluidity.py): the parameters of mu_i plus the cooperativity's amplitude and time."""
+
+    type: Literal["nonlocal_mu_i"]
+    nonlocal_amplitude: Pos  # -, A: cooperativity length A d / sqrt|mu - mu_s|
+    fluidity_time: Pos  # s, t_0 of the fluidity's relaxation; short against the flow
+
+
 class DEMMaterialCfg(StrictModel):
     """The multiscale material: one periodic DEM RVE per point, from the case's [rve]."""
 
@@ -202,7 +211,7 @@ class DEMMaterialCfg(StrictModel):
 
 
 MaterialCfg = Annotated[LinearElasticCfg | MohrCoulombCfg | DruckerPragerCfg | MuICfg
-                        | DEMMaterialCfg, Field(discriminator="type")]
+                        | NonlocalMuICfg | DEMMaterialCfg, Field(discriminator="type")]
 
 
 class _Body(StrictModel):

@@ -18,6 +18,7 @@ import numpy as np
 from grainscale.config.case import FLIP_DEFAULT, DampingCfg, SolverCfg
 from grainscale.distributed.comm import Comm
 from grainscale.mpm import boundary
+from grainscale.mpm.fluidity import advance_fluidity
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import Points
 from grainscale.mpm.rigid import RigidBody
@@ -107,8 +108,13 @@ class MPMState:
 
     def critical_dt(self) -> float:
         """CFL limit dt = h_min / (c + |v|_max), or the period bound of a rigid body's
-        penalty contact if smaller (multiply by the CFL number to use it)."""
-        dt = float(self.grid.cell_size.min() / (self.wave_speed() + self.vmax))
+        penalty contact, or a material's own limit over the CFL number, whichever is
+        smallest (multiply by the CFL number to use it)."""
+        h = float(self.grid.cell_size.min())
+        dt = h / (self.wave_speed() + self.vmax)
+        for m in self.materials:  # a material's own limit (nonlocal fluidity's diffusion)
+            if hasattr(m, "max_dt"):
+                dt = min(dt, m.max_dt(h) / self.cfl)
         if self.rigid is not None:
             dt = min(dt, self.rigid.critical_dt(self.lp_min))
         return dt
@@ -140,6 +146,14 @@ def p2g(s: MPMState) -> None:
     if not ok:
         raise SimulationError(f"step {s.step}: non-finite point velocity")
     s.active = s.mass > s.mass_tol
+
+
+def fluidity(s: MPMState, dt: float) -> None:
+    """The granular fluidity of a nonlocal material (materials/fluidity.py) advanced on
+    the grid (mpm/fluidity.py), before the stress update that uses it."""
+    for m, ids in zip(s.materials, s.mat_points, strict=True):
+        if hasattr(m, "fluidity"):
+            advance_fluidity(s, m, ids, dt)
 
 
 def nodes_contact(s: MPMState) -> bool:
@@ -336,6 +350,7 @@ def step(s: MPMState, dt: float) -> None:
     update_stress sits."""
     shape_functions(s)
     p2g(s)
+    fluidity(s, dt)
     rigid_velocity(s, dt)
     grid_velocity(s)
     if s.scheme == "USF":

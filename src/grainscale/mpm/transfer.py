@@ -230,6 +230,64 @@ def velocity_gradient_kernel(vgrid, base, w, dw, nodes, ns, dt, dH, F, vol0, vol
     parallel_for(_vgrad_task, vgrid, base, w, dw, nodes, ns, dt, dH, F, vol0, vol)
 
 
+@njit(cache=True, fastmath=True, nogil=True)
+def _gradient_task(t, nt, field, base, w, dw, nodes, ns, out):
+    P = out.shape[0]
+    nx, ny = nodes[0], nodes[1]
+    for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
+        for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
+            for a in range(3):
+                for b in range(3):
+                    out[p, a, b] = 0.0
+            for k in range(ns):
+                iz = base[p, 2] + k
+                wz = w[p, 2, k]
+                gz = dw[p, 2, k]
+                for j in range(ns):
+                    wy = w[p, 1, j]
+                    gy = dw[p, 1, j]
+                    row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
+                    for i in range(ns):
+                        wx = w[p, 0, i]
+                        dx = dw[p, 0, i] * wy * wz
+                        dy = wx * gy * wz
+                        dz = wx * wy * gz
+                        for a in range(3):
+                            f = field[row + i, a]
+                            out[p, a, 0] += f * dx
+                            out[p, a, 1] += f * dy
+                            out[p, a, 2] += f * dz
+
+
+def gradient_kernel(field, base, w, dw, nodes, ns, out):
+    """out[p, a, b] = sum_I field[I, a] dS_Ip/dx_b: the gradient at the points of a nodal
+    field (n_nodes, 3), in its units per m."""
+    parallel_for(_gradient_task, field, base, w, dw, nodes, ns, out)
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def _interpolate_task(t, nt, field, base, w, nodes, ns, out):
+    P = out.shape[0]
+    nx, ny = nodes[0], nodes[1]
+    for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
+        for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
+            acc = 0.0
+            for k in range(ns):
+                iz = base[p, 2] + k
+                wz = w[p, 2, k]
+                for j in range(ns):
+                    wyz = w[p, 1, j] * wz
+                    row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
+                    for i in range(ns):
+                        acc += field[row + i] * w[p, 0, i] * wyz
+            out[p] = acc
+
+
+def interpolate_kernel(field, base, w, nodes, ns, out):
+    """out[p] = sum_I S_Ip field[I]: a nodal scalar (n_nodes,) at the points (P,)."""
+    parallel_for(_interpolate_task, field, base, w, nodes, ns, out)
+
+
 @njit(cache=True, fastmath=True, inline="always")
 def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x, v, C):
     ax = ay = az = ux = uy = uz = 0.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 from grainscale.mpm.materials.base import Material
 from grainscale.mpm.materials.drucker_prager import DruckerPrager
 from grainscale.mpm.materials.elastic import LinearElastic
+from grainscale.mpm.materials.fluidity import NonlocalMuI
 from grainscale.mpm.materials.mohr_coulomb import MohrCoulomb
 from grainscale.mpm.materials.mu_i import MuI
 
@@ -13,6 +14,8 @@ KINDS = {
     "mohr_coulomb": MohrCoulomb,
     "drucker_prager": DruckerPrager,
     "mu_i": MuI,
+    "nonlocal_mu_i": NonlocalMuI,
 }
 
-__all__ = ["KINDS", "DruckerPrager", "LinearElastic", "Material", "MohrCoulomb", "MuI"]
+__all__ = ["KINDS", "DruckerPrager", "LinearElastic", "Material", "MohrCoulomb", "MuI",
+           "NonlocalMuI"]
