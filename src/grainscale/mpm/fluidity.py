@@ -91,8 +91,7 @@ def advance_fluidity(s, mat, ids, dt: float) -> None:
     # 2. weak Laplacian: the internal-force transfer with the 'stress' row 0 = grad g
     field = np.zeros((len(V), 3))
     field[:, 0] = g
-    gradient_kernel(field, s.base, s.w, s.dw, s.grid.nodes, s.ns, grad)
-    grad[:, 1:, :] = 0.0
+    gradient_kernel(field, s.base, s.w, s.dw, s.grid.nodes, s.ns, grad)  # rows 1, 2: 0
     zero3 = np.zeros(3)
     f, ok = s.transfer.force(pts.m, pts.vol, grad, np.zeros((pts.n, 3)), zero3,
                              s.grid.cell_size, s.base, s.w, s.dw, s.grid.nodes, s.ns)
@@ -103,8 +102,6 @@ def advance_fluidity(s, mat, ids, dt: float) -> None:
     # 3. the nodal update
     new = g.copy()
     new[a] = np.maximum(0.0, g[a] + dt * (mat.A * mat.d) ** 2 / mat.t_0 * lap[a])
-    for nodes in held:
-        new[nodes] = 0.0
     ld = a & (W > 0.0)
     # beyond mu_2 no rate balances the stress (c = 0): g then grows to where it relaxes
     # the stress back within a step; the cap keeps the local steady state finite
@@ -115,6 +112,8 @@ def advance_fluidity(s, mat, ids, dt: float) -> None:
     with np.errstate(divide="ignore"):
         c = mu_I * (mat.mu_2 - mu_I) * mat.d / (np.maximum(rp_I, 1e-300) * mat.I_0)
     new[ld] = logistic(gl, (mu_I - mat.mu_s) / mat.t_0, c / mat.t_0, dt)
+    for nodes in held:  # after the seed, which would otherwise lift them off zero
+        new[nodes] = 0.0
     # 4. the points take the nodal change
     interpolate_kernel(new - g, s.base, s.w, s.grid.nodes, s.ns, dg_p)
     mat.fluidity[:] = np.maximum(0.0, mat.fluidity + dg_p[sel])
