@@ -28,11 +28,10 @@ import tomllib
 from pathlib import Path
 
 from analyse import analyse, table
-from baselines import run
+from baselines import reshape, run
 
 HERE = Path(__file__).resolve().parent
 PHI = 30.0  # deg, mohr_coulomb.toml's friction angle
-ABOVE = 1.25  # m of grid above the bed's surface (room for the intruder)
 
 VARIANTS = {
     "base": {},
@@ -49,12 +48,8 @@ def variant_case(width: float = 2.5, depth: float = 2.0, cell: float = 0.125,
                  contact: str | None = None, friction: float = 0.0) -> dict:
     """mohr_coulomb.toml on a width x width quarter of a bed `depth` deep [m], cells of
     `cell` m, and the intruder's contact (default: the file's)."""
-    case = tomllib.loads((HERE / "mohr_coulomb.toml").read_text())
-    case["grid"]["cell_size"] = cell
-    case["grid"]["cells"] = [round(width / cell), round(width / cell),
-                             round((depth + ABOVE) / cell)]
-    case["bodies"][0]["hi"] = [width, width, depth]
-    case["rigid"]["center"][2] = depth
+    case = reshape(tomllib.loads((HERE / "mohr_coulomb.toml").read_text()), cell,
+                   width=width, depth=depth)
     if contact is not None:
         case["rigid"]["contact"] = contact
         case["rigid"]["friction"] = friction
