@@ -1,21 +1,16 @@
 """The column's frame measures: flow_state.py's medians of one frame (against values
 written out by hand for four points) and convergence.py's mass quantiles."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "column_collapse" / "flow_state.py"
+from example_scripts import load_example
 
 
 def _flow_state():
-    spec = importlib.util.spec_from_file_location("flow_state", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_example("column_collapse/flow_state.py")
 
 
 @pytest.mark.parametrize("with_rves", [False, True])
@@ -49,10 +44,7 @@ def test_mass_runouts_of_the_last_frame(tmp_path):
     the face, is not the one read."""
     from grainscale.io.vtk import PVDSeries, write_points_vtu
 
-    spec = importlib.util.spec_from_file_location("convergence", SCRIPT.with_name(
-        "convergence.py"))
-    conv = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(conv)
+    conv = load_example("column_collapse/convergence.py")
     series = PVDSeries(tmp_path / "frames.pvd")
     for k, x in enumerate((np.full(100, 0.1), 0.1 + 0.001 * np.arange(1, 101))):
         pts = np.zeros((100, 3))

@@ -1,18 +1,15 @@
 """examples/intrusion/friction_angle.py: the mobilised angle of a known stress state along
 each axis, its Student-t band, and a run over generated packings of a tiny RVE."""
 
-import importlib.util
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "intrusion" / "friction_angle.py"
-spec = importlib.util.spec_from_file_location("friction_angle", SCRIPT)
-fa = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(fa)
+from example_scripts import load_example
+
+fa = load_example("intrusion/friction_angle.py")
 
 CASE = """
 [rve]

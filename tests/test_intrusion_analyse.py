@@ -1,16 +1,15 @@
 """examples/intrusion/analyse.py on synthetic intrusion histories of known slope."""
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from example_scripts import load_example
 from grainscale.io.history import History
 from grainscale.theory.archimedes import k_phi, phi_for_k
 
-SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "intrusion" / "analyse.py"
 COLUMNS = ["step", "time", "depth", "depth_over_R", "force", "force_normalized",
            "kinetic_energy"]
 RADIUS, RHO_G = 0.5, 1600.0 * 9.81
@@ -19,14 +18,7 @@ SIGMA = 0.1      # scatter of p_u / (rho g R)
 X_T = 0.3        # d/R where the nonlinear start joins the line
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("intrusion_analyse", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-analyse = _module()
+analyse = load_example("intrusion/analyse.py")
 
 
 def curve(x, k, p0):

@@ -1,25 +1,17 @@
 """examples/intrusion/baselines.py: the continuum twin of a multiscale intrusion case, and
 the same case on another grid or bed (`reshape`)."""
 
-import importlib.util
-from pathlib import Path
 
 import pytest
 
+from example_scripts import EXAMPLES, load_example
 from grainscale.config.base import validate
 from grainscale.config.case import Case, check_case
 
-HERE = Path(__file__).resolve().parents[1] / "examples" / "intrusion"
+HERE = EXAMPLES / "intrusion"
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("intrusion_baselines", HERE / "baselines.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-baselines = _module()
+baselines = load_example("intrusion/baselines.py")
 
 
 @pytest.mark.parametrize("name", ["quick.toml", "quick_cuboid.toml", "mohr_coulomb.toml"])

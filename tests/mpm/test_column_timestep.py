@@ -1,23 +1,20 @@
 """A continuum column collapse should not depend on the time step (the flow-numerics
 issue: with a FLIP/PIC blend it did, by a factor 2-3, through its per-step PIC share)."""
 
-import importlib.util
 import tomllib
 from pathlib import Path
 
 import pytest
 import tomli_w
 
+from example_scripts import load_example
 from grainscale.cli import main
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"
 
 
 def _convergence():
-    spec = importlib.util.spec_from_file_location("convergence", EXAMPLE / "convergence.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_example("column_collapse/convergence.py")
 
 
 def _runout(tmp_path, cfl, update="apic", relaxation_time=None):

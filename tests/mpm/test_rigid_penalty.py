@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from mpmutil import elastic_box, impulse_errors, rollers, run
 
+from example_scripts import load_example
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import fill_box
@@ -208,13 +209,7 @@ def test_penalty_reaction_has_no_grid_ripple():
     the nodes contact steps at every node plane (measured 6.4 %, over 5 times the
     penalty's). Deeper, the bed's corner flow (a large-strain elastic wedge) adds its own
     jumps, so the test stops at 2.4 cells."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[2] / "examples" / "intrusion" / "ripple.py"
-    spec = importlib.util.spec_from_file_location("ripple", path)
-    ripple = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ripple)
+    ripple = load_example("intrusion/ripple.py")
     r = {c: ripple.ripple(ripple.punch("elastic", c, 0.05, 0.12)[0], 0.05)
          for c in ("penalty", "nodes")}
     assert r["penalty"]["max_percent"] < 5.0, r
@@ -229,13 +224,7 @@ def test_flat_punch_on_elastic_half_space_gives_boussinesq_stiffness():
     issue's tolerance; measured 0.3 %), a_eff the radius of the disc the punch's contact
     points cover (6 % above a at 3 cells over the radius). Without the extrapolation
     the cubes are 31 % and 23 % too stiff."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[2] / "examples" / "intrusion" / "flat_punch.py"
-    spec = importlib.util.spec_from_file_location("flat_punch", path)
-    fp = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(fp)
+    fp = load_example("intrusion/flat_punch.py")
     rows = [fp.punch(size, 3) for size in (6.0, 9.0)]
     a_eff = rows[0]["spacing"] * np.sqrt(4.0 * rows[0]["in_contact"] / np.pi)
     assert abs(a_eff / fp.RADIUS - 1.0) < 0.1  # the disc is resolved
