@@ -1,6 +1,7 @@
 """Load a script under examples/ as a module, so that tests can call its functions."""
 
 import importlib.util
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -8,8 +9,11 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
 def load_example(relpath: str) -> ModuleType:
-    """examples/<relpath> (e.g. "intrusion/analyse.py") imported under its stem."""
+    """examples/<relpath> (e.g. "intrusion/analyse.py") imported under its stem, its
+    folder on sys.path as when it runs as a script (so that it finds its siblings)."""
     path = EXAMPLES / relpath
+    if str(path.parent) not in sys.path:
+        sys.path.insert(0, str(path.parent))
     spec = importlib.util.spec_from_file_location(path.stem, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

@@ -1,6 +1,9 @@
-"""examples/intrusion/baselines.py: the continuum twin of a multiscale intrusion case, and
-the same case on another grid or bed (`reshape`)."""
+"""examples/intrusion/baselines.py (the continuum twin of a multiscale intrusion case) and
+reshape.py (the same case on another grid or in another bed)."""
 
+import subprocess
+import sys
+import tomllib
 
 import pytest
 
@@ -12,6 +15,7 @@ HERE = EXAMPLES / "intrusion"
 
 
 baselines = load_example("intrusion/baselines.py")
+reshape = load_example("intrusion/reshape.py")
 
 
 @pytest.mark.parametrize("name", ["quick.toml", "quick_cuboid.toml", "mohr_coulomb.toml"])
@@ -21,10 +25,10 @@ def test_reshape_keeps_the_intruder_on_the_surface(name):
     and the case passes the loader's checks."""
     path = HERE / name
     case = (baselines.baseline_case(path, "mohr_coulomb", 20.0) if name.startswith("quick")
-            else baselines.tomllib.loads(path.read_text()))
+            else tomllib.loads(path.read_text()))
     rigid0 = {k: list(v) for k, v in case["rigid"].items() if k in ("center", "lo", "hi")}
-    out = baselines.reshape(case, 0.125, 1, 5.0, 4.0)
-    assert out["grid"]["cells"] == [40, 40, round((4.0 + baselines.ABOVE) / 0.125)]
+    out = reshape.reshape(case, 0.125, 1, 5.0, 4.0)
+    assert out["grid"]["cells"] == [40, 40, round((4.0 + reshape.ABOVE) / 0.125)]
     assert out["bodies"][0]["hi"] == [5.0, 5.0, 4.0]
     assert out["bodies"][0]["points_per_cell"] == 1
     rigid = out["rigid"]
@@ -37,5 +41,26 @@ def test_reshape_keeps_the_intruder_on_the_surface(name):
 
 def test_reshape_defaults_leave_the_case_as_it_was():
     case = baselines.baseline_case(HERE / "quick.toml", "mohr_coulomb", 20.0)
-    before = baselines.tomllib.loads(baselines.tomli_w.dumps(case))
-    assert baselines.reshape(case) == before
+    before = tomllib.loads(baselines.tomli_w.dumps(case))
+    assert reshape.reshape(case) == before
+
+
+def test_reshape_cli_writes_the_multiscale_case_in_a_deeper_bed(tmp_path):
+    """The written case keeps the probes at their depth below the surface (same x, y),
+    passes the loader's checks, and an existing file is not overwritten."""
+    out = tmp_path / "seed_bed.toml"
+    cmd = [sys.executable, str(HERE / "reshape.py"), str(HERE / "quick.toml"),
+           "--quarter", "5", "4", "--out", str(out)]
+    subprocess.run(cmd, check=True, capture_output=True)
+    old = tomllib.loads((HERE / "quick.toml").read_text())
+    new = tomllib.loads(out.read_text())
+    lift = 4.0 - old["bodies"][0]["hi"][2]
+    for p0, p1 in zip(old["output"]["probes"], new["output"]["probes"], strict=True):
+        assert p1["position"] == pytest.approx([*p0["position"][:2], p0["position"][2] + lift])
+    assert new["rve"] == old["rve"] and new["materials"] == old["materials"]
+    check_case(validate(Case, new, source=str(out)))
+    again = subprocess.run(cmd, capture_output=True, text=True)
+    assert again.returncode != 0 and "not overwritten" in again.stderr
+    bad = subprocess.run(cmd[:3] + ["--quarter", "0.8", "4", "--out", str(tmp_path / "x.toml")],
+                         capture_output=True, text=True)
+    assert bad.returncode != 0 and "--quarter" in bad.stderr and "> 1 m" in bad.stderr

@@ -29,33 +29,12 @@ import tomllib
 from pathlib import Path
 
 import tomli_w
+from reshape import add_args, check_args, reshape
 
 HERE = Path(__file__).resolve().parent
 DENSITY = 1600.0  # kg/m3: grains of 2650 kg/m3 at porosity 0.397 (seed §4.3)
 YOUNG = 10e6  # Pa: the order of the RVE's tangent stiffness at ~10 kPa
 NU = 0.3
-ABOVE = 1.25  # m of grid above the bed's surface (room for the intruder)
-
-
-def reshape(case: dict, cell: float | None = None, points_per_cell: int | None = None,
-            width: float | None = None, depth: float | None = None) -> dict:
-    """The intrusion case on cells of `cell` m with `points_per_cell`^3 points a cell, a
-    width x width quarter of a bed `depth` deep [m] (each default: the case's own), the
-    intruder's base kept on the bed's surface. Changes `case` in place and returns it."""
-    body, grid, rigid = case["bodies"][0], case["grid"], case["rigid"]
-    cell = grid["cell_size"] if cell is None else cell
-    width = body["hi"][0] if width is None else width
-    lift = 0.0 if depth is None else depth - body["hi"][2]
-    depth = body["hi"][2] + lift
-    grid["cell_size"] = cell
-    grid["cells"] = [round(width / cell), round(width / cell), round((depth + ABOVE) / cell)]
-    body["hi"] = [width, width, depth]
-    if points_per_cell is not None:
-        body["points_per_cell"] = points_per_cell
-    for key in ("center", "lo", "hi"):
-        if key in rigid:
-            rigid[key][2] += lift
-    return case
 
 
 def continuum(material: str, phi: float) -> dict:
@@ -107,10 +86,7 @@ def main() -> None:
     ap.add_argument("--cases", nargs="+", default=["quick.toml", "quick_cuboid.toml"])
     ap.add_argument("--materials", nargs="+", default=["mohr_coulomb", "mu_i"],
                     choices=["mohr_coulomb", "mu_i"])
-    ap.add_argument("--cell-size", type=float, help="m (default: the case's)")
-    ap.add_argument("--points-per-cell", type=int, help="n: n^3 points a cell")
-    ap.add_argument("--quarter", type=float, nargs=2, metavar=("WIDTH", "DEPTH"),
-                    help="the quarter's side and the bed's depth, m")
+    add_args(ap)
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--phi", type=float, help="friction angle [deg]")
     g.add_argument("--phi-from", type=Path, help="JSON with phi_deg (friction_angle.py)")
@@ -118,12 +94,7 @@ def main() -> None:
     phi = args.phi if args.phi is not None else json.loads(args.phi_from.read_text())["phi_deg"]
     if not 0.0 < phi < 60.0:
         raise SystemExit(f"phi = {phi} deg: valid 0 < phi < 60")
-    if args.cell_size is not None and not 0.0 < args.cell_size <= 0.5:
-        raise SystemExit(f"--cell-size {args.cell_size}: valid 0 < h <= 0.5 m")
-    if args.points_per_cell is not None and not 1 <= args.points_per_cell <= 4:
-        raise SystemExit(f"--points-per-cell {args.points_per_cell}: valid 1 to 4")
-    if args.quarter is not None and not all(x > 1.0 for x in args.quarter):
-        raise SystemExit(f"--quarter {args.quarter}: valid side and depth > 1 m (R = 0.5 m)")
+    check_args(args.cell_size, args.points_per_cell, args.quarter)
     width, depth = args.quarter if args.quarter is not None else (None, None)
     runs = {}
     for name in args.cases:

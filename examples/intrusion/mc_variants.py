@@ -28,7 +28,8 @@ import tomllib
 from pathlib import Path
 
 from analyse import analyse, table
-from baselines import reshape, run
+from baselines import run
+from reshape import reshape
 
 HERE = Path(__file__).resolve().parent
 PHI = 30.0  # deg, mohr_coulomb.toml's friction angle

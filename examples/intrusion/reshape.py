@@ -1,0 +1,87 @@
+"""An intrusion case on another grid or in another bed, written as a new case file.
+
+    python examples/intrusion/reshape.py CASE --out NEW.toml
+        [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH]
+
+`--quarter` sets the quarter's side and the bed's depth [m]; the intruder's base stays
+on the bed's surface and the probes keep their depth below it, so the new case is the
+same experiment in a wider or deeper bed. For example the quick multiscale cylinder in
+the seed's 5 x 5 m quarter of a 4 m bed (51,200 RVEs; docs/validation.md §3):
+
+    python examples/intrusion/reshape.py examples/intrusion/quick.toml --quarter 5 4 \
+        --out seed_bed.toml
+"""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+from pathlib import Path
+
+import tomli_w
+
+ABOVE = 1.25  # m of grid above the bed's surface (room for the intruder)
+
+
+def reshape(case: dict, cell: float | None = None, points_per_cell: int | None = None,
+            width: float | None = None, depth: float | None = None) -> dict:
+    """The intrusion case on cells of `cell` m with `points_per_cell`^3 points a cell, a
+    width x width quarter of a bed `depth` deep [m] (each default: the case's own), the
+    intruder's base and the probes kept at their depth below the bed's surface. Changes
+    `case` in place and returns it."""
+    body, grid, rigid = case["bodies"][0], case["grid"], case["rigid"]
+    cell = grid["cell_size"] if cell is None else cell
+    width = body["hi"][0] if width is None else width
+    lift = 0.0 if depth is None else depth - body["hi"][2]
+    depth = body["hi"][2] + lift
+    grid["cell_size"] = cell
+    grid["cells"] = [round(width / cell), round(width / cell), round((depth + ABOVE) / cell)]
+    body["hi"] = [width, width, depth]
+    if points_per_cell is not None:
+        body["points_per_cell"] = points_per_cell
+    for key in ("center", "lo", "hi"):
+        if key in rigid:
+            rigid[key][2] += lift
+    for probe in case.get("output", {}).get("probes", []):
+        probe["position"][2] += lift
+    return case
+
+
+def check_args(cell: float | None, points_per_cell: int | None,
+               quarter: list[float] | None) -> None:
+    """Refuse a grid or bed the intruder (R = 0.5 m) does not fit, naming the option."""
+    if cell is not None and not 0.0 < cell <= 0.5:
+        raise SystemExit(f"--cell-size {cell}: valid 0 < h <= 0.5 m")
+    if points_per_cell is not None and not 1 <= points_per_cell <= 4:
+        raise SystemExit(f"--points-per-cell {points_per_cell}: valid 1 to 4")
+    if quarter is not None and not all(x > 1.0 for x in quarter):
+        raise SystemExit(f"--quarter {quarter}: valid side and depth > 1 m (R = 0.5 m)")
+
+
+def add_args(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--cell-size", type=float, help="m (default: the case's)")
+    ap.add_argument("--points-per-cell", type=int, help="n: n^3 points a cell")
+    ap.add_argument("--quarter", type=float, nargs=2, metavar=("WIDTH", "DEPTH"),
+                    help="the quarter's side and the bed's depth, m")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("case", type=Path)
+    ap.add_argument("--out", type=Path, required=True, help="the new case file")
+    add_args(ap)
+    args = ap.parse_args()
+    check_args(args.cell_size, args.points_per_cell, args.quarter)
+    if args.out.exists():
+        raise SystemExit(f"--out {args.out}: exists; not overwritten")
+    case = tomllib.loads(args.case.read_text())
+    width, depth = args.quarter if args.quarter is not None else (None, None)
+    reshape(case, args.cell_size, args.points_per_cell, width, depth)
+    if args.quarter is not None:
+        case["title"] += f" in a {width:g} x {width:g} m quarter of a {depth:g} m bed"
+    args.out.write_text(tomli_w.dumps(case))
+    print(args.out)
+
+
+if __name__ == "__main__":
+    main()
