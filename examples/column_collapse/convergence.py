@@ -4,7 +4,7 @@
         [--materials mu_i mohr_coulomb] [--friction-angle 22] [--points-per-cell 2]
         [--floor friction|fixed|roller|penalty] [--cfl 0.5] [--t-end 7]
         [--velocity-update apic|flip|aflip] [--flip F | --relaxation-time TAU]
-        [--separation reset|recompact]
+        [--separation reset|recompact] [--channel W_MM --wall-friction MU_W]
 
 Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
 a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
@@ -21,6 +21,12 @@ position. The final deposit (last frame): its thickness along the channel, and t
 runout of the part at least 2 and 3 bead diameters thick (the experiment's 1.15 mm beads;
 `front` itself is the outermost point, however thin the layer it ends in), and of the
 point behind which 95 % and 99 % of the mass lies (`runout_mass95`, `runout_mass99`).
+
+`--channel W_MM` replaces the slice by half of a channel W_MM wide (the symmetry plane
+y = 0 frictionless, a Coulomb wall of `--wall-friction` at y = W/2): the experiments'
+channels have walls whose friction the slice leaves out. Such runs also report the
+deposit in the layer of points along the wall (`wall_runout`, `wall_runout_3d`,
+`wall_runout_mass99`), which is where a profile photographed through the wall lies.
 """
 
 from __future__ import annotations
@@ -54,7 +60,8 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             floor: str = "friction", cfl: float = 0.5, t_end: float = 7.0,
             update: str | None = None, flip: float | None = None,
             relaxation_time: float | None = None, separation: str | None = None,
-            nonlocal_amplitude: float = 0.48, fluidity_time: float = 1e-4) -> dict:
+            nonlocal_amplitude: float = 0.48, fluidity_time: float = 1e-4,
+            channel: float | None = None, wall_friction: float = 0.0) -> dict:
     """mu_i.toml with cells of h metres (and a slice one cell thick), its Mohr-Coulomb
     twin, or its nonlocal twin (`nonlocal_mu_i`, the same beads with amplitude A and
     fluidity time t_0; docs/mpm.md: nonlocal mu(I)); n x n x n points a cell; the floor
@@ -65,7 +72,9 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     reaches two cells below the floor); runs end at t_end tau_c; `update`, `flip` and
     `relaxation_time` replace mu_i.toml's solver.velocity_update, solver.flip and
     solver.velocity_relaxation_time [s] when `update` is given (docs/mpm.md: velocity
-    update); `separation` replaces the mu(I) material's (docs/mpm.md: mu(I) rheology)."""
+    update); `separation` replaces the mu(I) material's (docs/mpm.md: mu(I) rheology);
+    `channel` [m] makes the slice half of a channel that wide, its wall at y = channel/2
+    with Coulomb friction `wall_friction` (frictionless at 0), whole cells wide."""
     case = tomllib.loads((HERE / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
@@ -94,6 +103,21 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             bc["box"]["hi"][1] = h
             if bc.get("normal") == "y":
                 bc["box"]["lo"][1] = h
+    if channel is not None:
+        half = round(channel / 2 / h)
+        if half < 1 or abs(half * h - channel / 2) > 1e-9 * channel:
+            raise ValueError(f"--channel {channel * 1e3:g} mm: half of it must be a whole "
+                             f"number (>= 1) of {h * 1e3:g} mm cells")
+        if wall_friction < 0.0:
+            raise ValueError(f"--wall-friction {wall_friction}: valid >= 0")
+        case["grid"]["cells"][1] = half
+        case["bodies"][0]["hi"][1] = channel / 2
+        case["boundaries"] = [bc for bc in case["boundaries"] if bc.get("normal") != "y"]
+        for bc in case["boundaries"]:
+            if "box" in bc:
+                bc["box"]["hi"][1] = channel / 2
+        case["boundaries"].append({"type": "friction", "face": "y+", "friction": wall_friction}
+                                  if wall_friction > 0 else {"type": "roller", "face": "y+"})
     floor_bc = case["boundaries"][0]
     assert floor_bc.get("face") == "z-" and floor_bc["type"] == "friction"
     if floor in ("fixed", "roller"):
@@ -113,13 +137,16 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             "type": "mohr_coulomb", "density": mu["density"],
             "youngs_modulus": mu["youngs_modulus"], "poisson_ratio": mu["poisson_ratio"],
             "friction_angle": friction_angle, "dilation_angle": 0.0}
-    case["title"] = f"column collapse, {material}, {h * 1e3:g} mm cells"
+    case["title"] = f"column collapse, {material}, {h * 1e3:g} mm cells" + (
+        f", channel {channel * 1e3:g} mm wide, wall friction {wall_friction:g}"
+        if channel is not None else "")
     return case
 
 
 def variant(points_per_cell: int, floor: str, cfl: float, t_end: float,
             update: str | None = None, flip: float | None = None,
-            relaxation_time: float | None = None, separation: str | None = None) -> str:
+            relaxation_time: float | None = None, separation: str | None = None,
+            channel: float | None = None, wall_friction: float = 0.0) -> str:
     """Suffix of a run folder for the non-default options ('' for mu_i.toml's)."""
     return ((f"_n{points_per_cell}" if points_per_cell != 2 else "")
             + (f"_{separation}" if separation is not None else "")
@@ -128,7 +155,8 @@ def variant(points_per_cell: int, floor: str, cfl: float, t_end: float,
             + (f"_tau{relaxation_time * 1e3:g}ms" if relaxation_time is not None else "")
             + (f"_{floor}" if floor != "friction" else "")
             + (f"_cfl{cfl:g}" if cfl != 0.5 else "")
-            + (f"_t{t_end:g}" if t_end != 7.0 else ""))
+            + (f"_t{t_end:g}" if t_end != 7.0 else "")
+            + (f"_W{channel * 1e3:g}mm_muw{wall_friction:g}" if channel is not None else ""))
 
 
 def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
@@ -160,6 +188,20 @@ def mass_runouts(run: Path) -> dict[str, float]:
     q = np.quantile(x[:, 0], [0.95, 0.99])
     return {"runout_mass95": float((q[0] - LENGTH) / LENGTH),
             "runout_mass99": float((q[1] - LENGTH) / LENGTH)}
+
+
+def wall_runouts(run: Path, case: dict) -> dict[str, float]:
+    """Front, 3-bead deposit and 99 % mass runouts of the layer of points along a channel's
+    wall (centres within one point spacing of it): the deposit a photograph through the
+    wall shows."""
+    frames = PVDSeries.load(run / "frames.pvd").entries
+    x, _ = read_points_vtu(run / frames[-1][1])
+    spacing = case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+    wall = x[x[:, 1] > case["bodies"][0]["hi"][1] - spacing]
+    edges, thick = deposit_profile(wall[:, 0], wall[:, 2], spacing / 2, spacing)
+    return {"wall_runout": float((wall[:, 0].max() + spacing / 2 - LENGTH) / LENGTH),
+            "wall_runout_3d": (front_at_thickness(edges, thick, 3 * BEAD) - LENGTH) / LENGTH,
+            "wall_runout_mass99": float((np.quantile(wall[:, 0], 0.99) - LENGTH) / LENGTH)}
 
 
 def thick_runouts(edges: np.ndarray, thick: np.ndarray) -> dict[str, float]:
@@ -275,7 +317,16 @@ def main() -> None:
                     help="solver.velocity_relaxation_time [s] of flip or aflip")
     ap.add_argument("--separation", default=None, choices=["reset", "recompact"],
                     help="the mu(I) material's separation, instead of mu_i.toml's")
+    ap.add_argument("--channel", type=float, default=None, metavar="W_MM",
+                    help="half of a channel W_MM wide instead of the slice")
+    ap.add_argument("--wall-friction", type=float, default=0.0,
+                    help="Coulomb friction of the channel's wall (with --channel)")
     args = ap.parse_args()
+    channel = args.channel * 1e-3 if args.channel is not None else None
+    if channel is None and args.wall_friction:
+        raise SystemExit("--wall-friction needs --channel (the slice's walls are frictionless)")
+    if args.wall_friction < 0:
+        raise SystemExit(f"--wall-friction {args.wall_friction}: valid >= 0")
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = {"mu_i": "mu(I)", "nonlocal_mu_i": "nonlocal mu(I)"}.get(
@@ -284,26 +335,31 @@ def main() -> None:
             separation = args.separation if mat != "mohr_coulomb" else None
             suffix = variant(args.points_per_cell, args.floor, args.cfl, args.t_end,
                              args.velocity_update, args.flip, args.relaxation_time,
-                             separation)
+                             separation, channel, args.wall_friction)
             out = args.out / f"{mat}_{mm:g}mm{suffix}"
             case = case_at(mm * 1e-3, mat, args.friction_angle, args.points_per_cell,
                            args.floor, args.cfl, args.t_end, args.velocity_update, args.flip,
                            args.relaxation_time, separation, args.nonlocal_amplitude,
-                           args.fluidity_time)
+                           args.fluidity_time, channel, args.wall_friction)
             wall = run_one(case, out)
             h = read_history(out / "run" / "history.csv")
             histories[(mat, mm)] = h
             deposits[(mat, mm)] = deposit(out / "run", case)
             row = {"material": mat, "label": label, "cell_mm": mm, "wall_s": round(wall, 1),
                    **measures(h), **thick_runouts(*deposits[(mat, mm)]),
-                   **mass_runouts(out / "run")}
+                   **mass_runouts(out / "run"),
+                   **(wall_runouts(out / "run", case) if channel is not None else {})}
             results.append(row)
             print(f"{label:24s} {mm:5g} mm: runout {row['runout']:.3f} (deposit >= 2 / 3 "
                   f"beads thick: {row['runout_2d']:.3f} / {row['runout_3d']:.3f}; 99 % of "
                   f"the mass: {row['runout_mass99']:.3f}), H_f/H_i "
                   f"{row['height_ratio']:.3f}, front stops at "
                   f"{row['front_stop_t_over_tc']:.2f} tau_c, KE end/peak "
-                  f"{row['kinetic_energy_end_over_peak']:.3f}, {wall:.0f} s", flush=True)
+                  f"{row['kinetic_energy_end_over_peak']:.3f}, {wall:.0f} s"
+                  + (f"; along the wall: front {row['wall_runout']:.3f}, >= 3 beads "
+                     f"{row['wall_runout_3d']:.3f}, 99 % of its mass "
+                     f"{row['wall_runout_mass99']:.3f}" if channel is not None else ""),
+                  flush=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=1))
     plot(results, histories, deposits, args.out / "convergence.png")
     summary = {}
