@@ -64,3 +64,20 @@ def test_reshape_cli_writes_the_multiscale_case_in_a_deeper_bed(tmp_path):
     bad = subprocess.run(cmd[:3] + ["--quarter", "0.8", "4", "--out", str(tmp_path / "x.toml")],
                          capture_output=True, text=True)
     assert bad.returncode != 0 and "--quarter" in bad.stderr and "> 1 m" in bad.stderr
+
+
+def test_to_depth_sets_the_end_time_from_ramp_and_velocity(tmp_path):
+    """quick.toml ends at 2.3 s, where its header says the cylinder is 0.55 m (1.1 R)
+    deep: 0.2 s of linear ramp to 0.25 m/s (0.025 m) then 2.1 s steady. Within the ramp
+    d = v t^2 / (2 t_ramp); the two branches meet at the ramp's end."""
+    case = tomllib.loads((HERE / "quick.toml").read_text())
+    assert reshape.end_time_for(case, 1.1) == pytest.approx(case["time"]["end"], abs=1e-12)
+    assert reshape.end_time_for(case, 0.05) == pytest.approx(0.2, abs=1e-12)
+    assert reshape.end_time_for(case, 0.02) == pytest.approx((2 * 0.01 * 0.2 / 0.25) ** 0.5)
+    out = tmp_path / "deep.toml"
+    cmd = [sys.executable, str(HERE / "reshape.py"), str(HERE / "quick.toml"), "--out", str(out)]
+    subprocess.run(cmd + ["--to-depth", "1.8"], check=True, capture_output=True)
+    assert tomllib.loads(out.read_text())["time"]["end"] == pytest.approx(3.7)
+    bad = subprocess.run(cmd[:-1] + [str(tmp_path / "x.toml"), "--to-depth", "3.5"],
+                         capture_output=True, text=True)
+    assert bad.returncode != 0 and "--to-depth 3.5: valid 0 < d/R < 3" in bad.stderr

@@ -1,11 +1,12 @@
 """An intrusion case on another grid or in another bed, written as a new case file.
 
     python examples/intrusion/reshape.py CASE --out NEW.toml
-        [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH]
+        [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH] [--to-depth D_OVER_R]
 
 `--quarter` sets the quarter's side and the bed's depth [m]; the intruder's base stays
 on the bed's surface and the probes keep their depth below it, so the new case is the
-same experiment in a wider or deeper bed. For example the quick multiscale cylinder in
+same experiment in a wider or deeper bed. `--to-depth` ends the run when the intruder
+reaches that d/R (time.end from its ramp and velocity). For example the quick multiscale cylinder in
 the seed's 5 x 5 m quarter of a 4 m bed (51,200 RVEs; docs/validation.md §3):
 
     python examples/intrusion/reshape.py examples/intrusion/quick.toml --quarter 5 4 \
@@ -47,6 +48,18 @@ def reshape(case: dict, cell: float | None = None, points_per_cell: int | None =
     return case
 
 
+def end_time_for(case: dict, depth_over_r: float) -> float:
+    """time.end [s] at which the intruder, ramped linearly from start_time to its
+    velocity over ramp_time and steady after, has gone depth_over_r x R deep."""
+    rigid = case["rigid"]
+    speed = abs(sum(v * v for v in rigid["velocity"]) ** 0.5)
+    ramp, start = rigid.get("ramp_time", 0.0), rigid.get("start_time", 0.0)
+    depth = depth_over_r * rigid["radius"]
+    if depth <= speed * ramp / 2:
+        return start + (2 * depth * ramp / speed) ** 0.5
+    return start + ramp / 2 + depth / speed
+
+
 def check_args(cell: float | None, points_per_cell: int | None,
                quarter: list[float] | None) -> None:
     """Refuse a grid or bed the intruder (R = 0.5 m) does not fit, naming the option."""
@@ -63,6 +76,8 @@ def add_args(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--points-per-cell", type=int, help="n: n^3 points a cell")
     ap.add_argument("--quarter", type=float, nargs=2, metavar=("WIDTH", "DEPTH"),
                     help="the quarter's side and the bed's depth, m")
+    ap.add_argument("--to-depth", type=float, metavar="D_OVER_R",
+                    help="end when the intruder is this many radii deep")
 
 
 def main() -> None:
@@ -77,6 +92,13 @@ def main() -> None:
     case = tomllib.loads(args.case.read_text())
     width, depth = args.quarter if args.quarter is not None else (None, None)
     reshape(case, args.cell_size, args.points_per_cell, width, depth)
+    if args.to_depth is not None:
+        bed = case["bodies"][0]["hi"][2]
+        if not 0.0 < args.to_depth * case["rigid"]["radius"] < bed:
+            raise SystemExit(f"--to-depth {args.to_depth}: valid 0 < d/R < "
+                             f"{bed / case['rigid']['radius']:g} (the bed's depth over R)")
+        case["time"]["end"] = end_time_for(case, args.to_depth)
+        case["title"] += f", to d/R = {args.to_depth:g}"
     if args.quarter is not None:
         case["title"] += f" in a {width:g} x {width:g} m quarter of a {depth:g} m bed"
     args.out.write_text(tomli_w.dumps(case))
