@@ -104,13 +104,7 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             if bc.get("normal") == "y":
                 bc["box"]["lo"][1] = h
     if channel is not None:
-        half = round(channel / 2 / h)
-        if half < 1 or abs(half * h - channel / 2) > 1e-9 * channel:
-            raise ValueError(f"--channel {channel * 1e3:g} mm: half of it must be a whole "
-                             f"number (>= 1) of {h * 1e3:g} mm cells")
-        if wall_friction < 0.0:
-            raise ValueError(f"--wall-friction {wall_friction}: valid >= 0")
-        case["grid"]["cells"][1] = half
+        case["grid"]["cells"][1] = channel_cells(h, channel, wall_friction)
         case["bodies"][0]["hi"][1] = channel / 2
         case["boundaries"] = [bc for bc in case["boundaries"] if bc.get("normal") != "y"]
         for bc in case["boundaries"]:
@@ -141,6 +135,19 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
         f", channel {channel * 1e3:g} mm wide, wall friction {wall_friction:g}"
         if channel is not None else "")
     return case
+
+
+def channel_cells(h: float, channel: float, wall_friction: float) -> int:
+    """Cells across half of a channel `channel` m wide on cells of h m; ValueError naming
+    the option where half the channel is not a whole number of cells or the wall's
+    friction is negative."""
+    half = round(channel / 2 / h)
+    if half < 1 or abs(half * h - channel / 2) > 1e-9 * channel:
+        raise ValueError(f"--channel {channel * 1e3:g} mm: half of it must be a whole "
+                         f"number (>= 1) of {h * 1e3:g} mm cells")
+    if wall_friction < 0.0:
+        raise ValueError(f"--wall-friction {wall_friction}: valid >= 0")
+    return half
 
 
 def variant(points_per_cell: int, floor: str, cfl: float, t_end: float,
@@ -325,8 +332,11 @@ def main() -> None:
     channel = args.channel * 1e-3 if args.channel is not None else None
     if channel is None and args.wall_friction:
         raise SystemExit("--wall-friction needs --channel (the slice's walls are frictionless)")
-    if args.wall_friction < 0:
-        raise SystemExit(f"--wall-friction {args.wall_friction}: valid >= 0")
+    for mm in args.cells if channel is not None else ():
+        try:  # before the first run
+            channel_cells(mm * 1e-3, channel, args.wall_friction)
+        except ValueError as err:
+            raise SystemExit(str(err)) from None
     results, histories, deposits = [], {}, {}
     for mat in args.materials:
         label = {"mu_i": "mu(I)", "nonlocal_mu_i": "nonlocal mu(I)"}.get(
