@@ -4,6 +4,7 @@ very same geometry.
     python examples/intrusion/baselines.py --phi-from phi.json --out DIR
         [--cases quick.toml quick_cuboid.toml] [--materials mohr_coulomb mu_i]
         [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH]
+        [--to-depth D_OVER_R] [--young E]
 
 For each case (beside this script unless a path is given) and material, the case with
 its DEM material replaced by a continuum of friction angle phi (the RVE's, measured by
@@ -11,7 +12,9 @@ friction_angle.py), the bed's density and a stiffness of the RVE's order, run in
 DIR/<material>_<case stem>; the probes, the [rve] and [triaxial] tables and the DEM
 history columns are dropped. `--cell-size`, `--points-per-cell` and `--quarter` (the
 quarter's side and the bed's depth, m) rerun the same cases on another grid or bed, to
-tell the discretisation's and the boundaries' share of a slope from the material's.
+tell the discretisation's and the boundaries' share of a slope from the material's;
+`--to-depth` drives the intruder deeper than the case does, `--young` sets the
+continuum's Young's modulus [Pa] (default: the RVE's order, 10 MPa).
 Then `analyse.py` compares them, e.g.
     python examples/intrusion/analyse.py DIR/mohr_coulomb_quick DIR/mohr_coulomb_quick_cuboid
         --phi-from phi.json
@@ -29,7 +32,7 @@ import tomllib
 from pathlib import Path
 
 import tomli_w
-from reshape import add_args, check_args, reshape
+from reshape import add_args, check_args, reshape, to_depth
 
 HERE = Path(__file__).resolve().parent
 DENSITY = 1600.0  # kg/m3: grains of 2650 kg/m3 at porosity 0.397 (seed §4.3)
@@ -37,23 +40,23 @@ YOUNG = 10e6  # Pa: the order of the RVE's tangent stiffness at ~10 kPa
 NU = 0.3
 
 
-def continuum(material: str, phi: float) -> dict:
+def continuum(material: str, phi: float, young: float = YOUNG) -> dict:
     if material == "mohr_coulomb":
-        return {"type": "mohr_coulomb", "density": DENSITY, "youngs_modulus": YOUNG,
+        return {"type": "mohr_coulomb", "density": DENSITY, "youngs_modulus": young,
                 "poisson_ratio": NU, "friction_angle": phi, "dilation_angle": 0.0,
                 "cohesion": 0.0, "tension_cutoff": 0.0}
     # mu(I) with mu_s = tan phi; quasi-static intrusion keeps I << I_0, so mu ~ mu_s
     mu_s = math.tan(math.radians(phi))
-    return {"type": "mu_i", "density": DENSITY, "youngs_modulus": YOUNG, "poisson_ratio": NU,
+    return {"type": "mu_i", "density": DENSITY, "youngs_modulus": young, "poisson_ratio": NU,
             "mu_s": mu_s, "mu_2": mu_s + 0.26, "I_0": 0.279, "grain_diameter": 0.01,
             "grain_density": 2650.0}
 
 
-def baseline_case(path: Path, material: str, phi: float) -> dict:
+def baseline_case(path: Path, material: str, phi: float, young: float = YOUNG) -> dict:
     case = tomllib.loads(path.read_text())
     for key in ("rve", "triaxial"):
         case.pop(key, None)
-    case["materials"] = {"sand": continuum(material, phi)}
+    case["materials"] = {"sand": continuum(material, phi, young)}
     case["title"] = f"{case['title']}: {material} baseline, phi = {phi:g} deg"
     out = case["output"]
     out.pop("probes", None)
@@ -87,6 +90,7 @@ def main() -> None:
     ap.add_argument("--materials", nargs="+", default=["mohr_coulomb", "mu_i"],
                     choices=["mohr_coulomb", "mu_i"])
     add_args(ap)
+    ap.add_argument("--young", type=float, default=YOUNG, help="Pa (default %(default)g)")
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--phi", type=float, help="friction angle [deg]")
     g.add_argument("--phi-from", type=Path, help="JSON with phi_deg (friction_angle.py)")
@@ -95,19 +99,26 @@ def main() -> None:
     if not 0.0 < phi < 60.0:
         raise SystemExit(f"phi = {phi} deg: valid 0 < phi < 60")
     check_args(args.cell_size, args.points_per_cell, args.quarter)
+    if not 1e4 <= args.young <= 1e10:
+        raise SystemExit(f"--young {args.young:g}: valid 1e4 to 1e10 Pa")
     width, depth = args.quarter if args.quarter is not None else (None, None)
-    runs = {}
+    cases = {}  # every case built (and checked) before the first run
     for name in args.cases:
         path = Path(name) if Path(name).is_file() else HERE / name
         if not path.is_file():
             raise SystemExit(f"--cases {name}: no such file (here or in {HERE})")
         for material in args.materials:
-            out = args.out / f"{material}_{path.stem}"
-            case = reshape(baseline_case(path, material, phi), args.cell_size,
+            case = reshape(baseline_case(path, material, phi, args.young), args.cell_size,
                            args.points_per_cell, width, depth)
-            wall = run(case, out)
-            print(f"{material} {path.name}: {out / 'run'} ({wall:.0f} s)", flush=True)
-            runs[f"{material}_{path.stem}"] = {"run": str(out / "run"), "wall_s": round(wall)}
+            if args.to_depth is not None:
+                to_depth(case, args.to_depth)
+            cases[(path, material)] = case
+    runs = {}
+    for (path, material), case in cases.items():
+        out = args.out / f"{material}_{path.stem}"
+        wall = run(case, out)
+        print(f"{material} {path.name}: {out / 'run'} ({wall:.0f} s)", flush=True)
+        runs[f"{material}_{path.stem}"] = {"run": str(out / "run"), "wall_s": round(wall)}
     print(json.dumps({"phi_deg": phi, "runs": runs}))
 
 

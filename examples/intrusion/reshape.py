@@ -60,6 +60,18 @@ def end_time_for(case: dict, depth_over_r: float) -> float:
     return start + ramp / 2 + depth / speed
 
 
+def to_depth(case: dict, depth_over_r: float) -> dict:
+    """End the case when the intruder is depth_over_r radii deep (in place); SystemExit
+    naming --to-depth where that is not inside the bed."""
+    bed, radius = case["bodies"][0]["hi"][2], case["rigid"]["radius"]
+    if not 0.0 < depth_over_r * radius < bed:
+        raise SystemExit(f"--to-depth {depth_over_r}: valid 0 < d/R < {bed / radius:g} "
+                         "(the bed's depth over R)")
+    case["time"]["end"] = end_time_for(case, depth_over_r)
+    case["title"] += f", to d/R = {depth_over_r:g}"
+    return case
+
+
 def check_args(cell: float | None, points_per_cell: int | None,
                quarter: list[float] | None) -> None:
     """Refuse a grid or bed the intruder (R = 0.5 m) does not fit, naming the option."""
@@ -93,12 +105,7 @@ def main() -> None:
     width, depth = args.quarter if args.quarter is not None else (None, None)
     reshape(case, args.cell_size, args.points_per_cell, width, depth)
     if args.to_depth is not None:
-        bed = case["bodies"][0]["hi"][2]
-        if not 0.0 < args.to_depth * case["rigid"]["radius"] < bed:
-            raise SystemExit(f"--to-depth {args.to_depth}: valid 0 < d/R < "
-                             f"{bed / case['rigid']['radius']:g} (the bed's depth over R)")
-        case["time"]["end"] = end_time_for(case, args.to_depth)
-        case["title"] += f", to d/R = {args.to_depth:g}"
+        to_depth(case, args.to_depth)
     if args.quarter is not None:
         case["title"] += f" in a {width:g} x {width:g} m quarter of a {depth:g} m bed"
     args.out.write_text(tomli_w.dumps(case))
