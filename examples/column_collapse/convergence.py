@@ -177,12 +177,21 @@ def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
             "kinetic_energy_end_over_peak": float(ke[-1] / ke.max()) if ke.max() > 0 else 0.0}
 
 
+def last_points(run: Path) -> np.ndarray:
+    """Point positions of the run's last frame [m], (n, 3)."""
+    frames = PVDSeries.load(run / "frames.pvd").entries
+    return read_points_vtu(run / frames[-1][1])[0]
+
+
+def point_spacing(case: dict) -> float:
+    """Distance between neighbouring points of the column's body [m]: cell / n."""
+    return case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+
+
 def deposit(run: Path, case: dict) -> tuple[np.ndarray, np.ndarray]:
     """Thickness of the last frame's deposit along x (bins one point spacing wide, point
     domains of half-width cell / (2 n)): bin boundaries and thicknesses [m]."""
-    frames = PVDSeries.load(run / "frames.pvd").entries
-    x, _ = read_points_vtu(run / frames[-1][1])
-    spacing = case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+    x, spacing = last_points(run), point_spacing(case)
     return deposit_profile(x[:, 0], x[:, 2], spacing / 2, spacing)
 
 
@@ -190,9 +199,7 @@ def mass_runouts(run: Path) -> dict[str, float]:
     """Runout ratio of the point behind which 95 % and 99 % of the mass of the last frame
     lies (points of equal mass, as every body here is one uniform box): a measure of where
     the deposit's mass went that a few points leading the front do not move."""
-    frames = PVDSeries.load(run / "frames.pvd").entries
-    x, _ = read_points_vtu(run / frames[-1][1])
-    q = np.quantile(x[:, 0], [0.95, 0.99])
+    q = np.quantile(last_points(run)[:, 0], [0.95, 0.99])
     return {"runout_mass95": float((q[0] - LENGTH) / LENGTH),
             "runout_mass99": float((q[1] - LENGTH) / LENGTH)}
 
@@ -201,9 +208,7 @@ def wall_runouts(run: Path, case: dict) -> dict[str, float]:
     """Front, 3-bead deposit and 99 % mass runouts of the layer of points along a channel's
     wall (centres within one point spacing of it): the deposit a photograph through the
     wall shows."""
-    frames = PVDSeries.load(run / "frames.pvd").entries
-    x, _ = read_points_vtu(run / frames[-1][1])
-    spacing = case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+    x, spacing = last_points(run), point_spacing(case)
     wall = x[x[:, 1] > case["bodies"][0]["hi"][1] - spacing]
     edges, thick = deposit_profile(wall[:, 0], wall[:, 2], spacing / 2, spacing)
     return {"wall_runout": float((wall[:, 0].max() + spacing / 2 - LENGTH) / LENGTH),

@@ -16,6 +16,7 @@ the seed's 5 x 5 m quarter of a 4 m bed (51,200 RVEs; docs/validation.md §3):
 from __future__ import annotations
 
 import argparse
+import math
 import tomllib
 from pathlib import Path
 
@@ -52,7 +53,7 @@ def end_time_for(case: dict, depth_over_r: float) -> float:
     """time.end [s] at which the intruder, ramped linearly from start_time to its
     velocity over ramp_time and steady after, has gone depth_over_r x R deep."""
     rigid = case["rigid"]
-    speed = abs(sum(v * v for v in rigid["velocity"]) ** 0.5)
+    speed = math.hypot(*rigid["velocity"])
     ramp, start = rigid.get("ramp_time", 0.0), rigid.get("start_time", 0.0)
     depth = depth_over_r * rigid["radius"]
     if depth <= speed * ramp / 2:
