@@ -68,3 +68,22 @@ def test_nominal_traction_keeps_the_initial_area():
     ratio = F[2, 2] * F[1, 1] * F[0, 0] / (0.75 * F[0, 0] + 0.25)
     assert s.points.stress[:, 0, 0].mean() == pytest.approx(-p / ratio, rel=0.005)
     assert abs(ratio - 1.0) > 0.05  # the check above really distinguishes the two
+
+
+def test_area_ratio_is_nanson_and_defined_for_a_crushed_point():
+    """a/A0 = J |F^-T N| (Nanson) for random deformations (J > 0) and three normals, to
+    round-off; where F is singular the cofactor form still answers: stretching a face of
+    normal z to zero thickness keeps its area, crushing it flat along x removes it, and
+    neither raises (the inverse-based form stopped a run with LinAlgError)."""
+    rng = np.random.default_rng(1)
+    F = np.eye(3) + 0.3 * rng.standard_normal((50, 3, 3))
+    J = np.linalg.det(F)
+    assert (J > 0).all()
+    for n in (np.array([0.0, 0.0, 1.0]), np.array([-1.0, 0.0, 0.0]),
+              np.array([0.0, 1.0, 1.0]) / np.sqrt(2.0)):
+        inv_t = np.linalg.solve(np.swapaxes(F, 1, 2), np.broadcast_to(n, (50, 3))[..., None])
+        ref = J * np.linalg.norm(inv_t[..., 0], axis=1)
+        np.testing.assert_allclose(boundary.area_ratio(F, n), ref, rtol=1e-12)
+    crushed = np.array([np.diag([1.0, 1.0, 0.0]), np.diag([0.0, 1.0, 1.0])])
+    np.testing.assert_array_equal(boundary.area_ratio(crushed, np.array([0.0, 0.0, 1.0])),
+                                  [1.0, 0.0])

@@ -203,10 +203,14 @@ def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: st
 
 
 def area_ratio(F: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """a/A0 = J |F^-T N| of each point's surface with reference normal N (Nanson)."""
-    J = np.linalg.det(F)
-    a = np.linalg.solve(np.swapaxes(F, 1, 2), np.broadcast_to(normal, (len(F), 3))[..., None])
-    return J * np.linalg.norm(a[..., 0], axis=1)
+    """a/A0 = J |F^-T N| of each point's surface with unit reference normal N (Nanson),
+    taken as |(F T1) x (F T2)| with T1 x T2 = N: J F^-T N is the cofactor of F applied to
+    N, which stays defined where F is singular (a surface crushed flat has no area)
+    instead of needing F's inverse."""
+    t1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(normal, t1)
+    return np.linalg.norm(np.cross(F @ t1, F @ t2), axis=1)
 
 
 def traction_loads(tractions: list[Traction], time: float, x: np.ndarray, lp: np.ndarray,
