@@ -179,7 +179,7 @@ def main() -> None:
         fig, axes = plt.subplots(1, len(args.phi), figsize=(5 * len(args.phi), 4), squeeze=False)
         for ax, phi in zip(axes[0], args.phi, strict=True):
             for r in (r for r in results if r["phi"] == phi):
-                ax.plot(r["curve"][:, 0], r["curve"][:, 1] / SURCHARGE, lw=0.8,
+                ax.plot(r["curve"][:, 0] / (2.0 * HALF), r["curve"][:, 1] / SURCHARGE, lw=0.8,
                         label=f"{r['cells_per_width']} cells over B")
             ax.axhspan(prandtl_nq(davis_angle(phi)), prandtl_nq(phi), color="0.85",
                        label="Radenkovic bounds (psi = 0)")
