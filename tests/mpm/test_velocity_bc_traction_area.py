@@ -72,9 +72,10 @@ def test_nominal_traction_keeps_the_initial_area():
 
 def test_area_ratio_is_nanson_and_defined_for_a_crushed_point():
     """a/A0 = J |F^-T N| (Nanson) for random deformations (J > 0) and three normals, to
-    round-off; where F is singular the cofactor form still answers: stretching a face of
-    normal z to zero thickness keeps its area, crushing it flat along x removes it, and
-    neither raises (the inverse-based form stopped a run with LinAlgError)."""
+    round-off; where F is singular the cofactor form still answers: squeezing a point to
+    zero thickness along z keeps the area of its z face, squeezing it along x removes
+    that face's area, and neither raises (the inverse-based form stopped a run with
+    LinAlgError)."""
     rng = np.random.default_rng(1)
     F = np.eye(3) + 0.3 * rng.standard_normal((50, 3, 3))
     J = np.linalg.det(F)
