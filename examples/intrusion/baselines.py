@@ -8,13 +8,13 @@ very same geometry.
 
 For each case (beside this script unless a path is given) and material, the case with
 its DEM material replaced by a continuum of friction angle phi (the RVE's, measured by
-friction_angle.py), the bed's density and a stiffness of the RVE's order, run into
+friction_angle.py), the bed's density and the RVE's measured secant stiffness, run into
 DIR/<material>_<case stem>; the probes, the [rve] and [triaxial] tables and the DEM
 history columns are dropped. `--cell-size`, `--points-per-cell` and `--quarter` (the
 quarter's side and the bed's depth, m) rerun the same cases on another grid or bed, to
 tell the discretisation's and the boundaries' share of a slope from the material's;
 `--to-depth` drives the intruder deeper than the case does, `--young` sets the
-continuum's Young's modulus [Pa] (default: the RVE's order, 10 MPa).
+continuum's Young's modulus [Pa] (default 10 MPa, the RVE's secant modulus).
 Then `analyse.py` compares them, e.g.
     python examples/intrusion/analyse.py DIR/mohr_coulomb_quick DIR/mohr_coulomb_quick_cuboid
         --phi-from phi.json

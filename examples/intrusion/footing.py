@@ -114,7 +114,7 @@ def footing(phi: float, cells_per_width: int, settlement: float, friction: float
                         geom=np.array([-HALF, -1.0, bed, HALF, 1.0, bed + 2 * h, 0.0, 0.0]),
                         contact="penalty", friction=friction)
     end = 0.5 * RAMP + settlement * 2.0 * HALF / SPEED
-    rows = [(0.0, 0.0)]
+    rows = []
     failure = None
     t0 = time.perf_counter()
     try:
@@ -124,15 +124,16 @@ def footing(phi: float, cells_per_width: int, settlement: float, friction: float
                 rows.append((-s.rigid.displacement[2], s.rigid.force[2] / (HALF * h)))
     except SimulationError as err:  # the curve so far is still worth its plot
         failure = f"{err}"
-    rec = np.array(rows)
+    rec = np.array(rows).reshape(-1, 2)
     s_over_b, nq = rec[:, 0] / (2.0 * HALF), rec[:, 1] / SURCHARGE
     plateau = s_over_b >= 0.5 * settlement
     return {"phi": phi, "cells_per_width": cells_per_width, "points_per_cell": points_per_cell,
-            "cell": h, "points": pts.n, "bed": [width, bed], "steps": len(rec) - 1,
+            "cell": h, "points": pts.n, "bed": [width, bed], "steps": len(rec),
             "wall_s": round(time.perf_counter() - t0, 1),
             "N_q_plateau": float(nq[plateau].mean()) if plateau.any() else math.nan,
-            "N_q_max": float(nq.max()), "failed_at_settlement": None if failure is None
-            else float(s_over_b[-1]), "failure": failure, "curve": rec}
+            "N_q_max": float(nq.max()) if len(nq) else math.nan,
+            "failed_at_settlement": None if failure is None
+            else float(s_over_b[-1]) if len(rec) else 0.0, "failure": failure, "curve": rec}
 
 
 def main() -> None:
