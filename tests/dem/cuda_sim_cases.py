@@ -1,4 +1,6 @@
-"""Scenarios of the CUDA DEM kernel against the CPU path, run by test_cuda_kernel.py.
+"""Scenarios of the CUDA DEM kernel against the CPU path, run by test_cuda_kernel.py:
+the kernel on tiny batches, then `grainscale run --device cuda` of a shrunk unit element
+and column.
 
 Run as a script in a subprocess whose environment has NUMBA_ENABLE_CUDASIM=1 (numba's
 CUDA simulator: it must be set before numba is imported, and must not reach the other
@@ -11,18 +13,26 @@ from __future__ import annotations
 
 import json
 import sys
+import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
 sys.path.insert(0, str(Path(__file__).parent))
 from dem_helpers import agitated_dense_state  # noqa: E402
 
+from grainscale.analysis import read_columns  # noqa: E402
+from grainscale.cli import main as grainscale  # noqa: E402
 from grainscale.dem import cuda_kernel, engine  # noqa: E402
 from grainscale.dem.state import RVEBatch, concatenate, from_packing  # noqa: E402
 
 THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+# The coupled runs' RVE: the fewest spheres a cell of 8 r_max holds at porosity 0.38
+SMALL_RVE = {"particles": 90, "radius_min": 2.0e-3, "radius_max": 2.2e-3}
 
 
 def block_size(threads: int) -> None:
@@ -70,6 +80,74 @@ def compare(cpu: RVEBatch, gpu: RVEBatch) -> dict:
                                 and np.array_equal(cpu.nbr_count, gpu.nbr_count)
                                 and np.array_equal(cpu.need_rebuild, gpu.need_rebuild)),
                capacity=[cpu.capacity, gpu.capacity])
+    return out
+
+
+def unit_element(folder: Path) -> Path:
+    """examples/unit_element/case.toml shrunk to one material point: a 10 mm cube in a
+    20 mm cell (the same strain rate, 0.1 /s, and lateral tractions of 100 kPa on its
+    point), 5 MPM steps of ~11 DEM steps each."""
+    case = tomllib.loads((EXAMPLES / "unit_element" / "case.toml").read_text())
+    case["grid"]["cell_size"] = 0.02
+    case["bodies"][0].update(hi=[0.01] * 3, points_per_cell=2)
+    for bc in case["boundaries"]:
+        if bc["type"] == "velocity":
+            bc["velocity"] = -0.002
+    for traction in case["tractions"]:
+        traction.update(lo=[0.0] * 3, hi=[0.01] * 3)
+    case["time"]["end"] = 3e-4
+    case["output"].update(interval=6e-5, frame_interval=3e-4)
+    case["rve"].update(SMALL_RVE)
+    case["rve"]["preparation"].update(porosity=0.38, porosity_tolerance=0.01)
+    path = folder / "unit_element.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
+def column(folder: Path) -> Path:
+    """examples/column_collapse/quick.toml shrunk to two material points (a 20 x 10 x
+    10 mm column, one point a cell): 5 MPM steps of the geostatic stage with its gate
+    and damping, then 5 after release, RVEs in real time with restitution 0.9."""
+    case = tomllib.loads((EXAMPLES / "column_collapse" / "quick.toml").read_text())
+    case["grid"]["cells"] = [4, 2, 3]
+    case["bodies"][0].update(hi=[0.02, 0.01, 0.01], points_per_cell=1)
+    for bc in case["boundaries"]:
+        if "box" in bc and bc["normal"] == "x":  # the gate, at the column's face
+            bc["box"] = {"lo": [0.02, 0.0, 0.0], "hi": [0.02, 0.01, 0.03]}
+        elif "box" in bc:  # the far channel wall
+            bc["box"] = {"lo": [0.0, 0.01, 0.0], "hi": [0.04, 0.01, 0.03]}
+    case["time"].update(start=-3e-4, end=3e-4)
+    case["materials"]["sand"]["library"] = 1
+    case["output"].update(interval=1e-4, frame_interval=3e-4)
+    case["output"]["column"].update(length=0.02, height=0.01)
+    case["rve"].update(SMALL_RVE)
+    case["rve"]["preparation"]["porosity_tolerance"] = 0.01
+    path = folder / "column.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
+def coupled_runs() -> dict:
+    """`grainscale run` of the shrunk unit element and column on both devices:
+    per history column, max |cpu - cuda| / max |cpu| over the rows; and the rows."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for make in (unit_element, column):
+            path = make(folder)
+            hist = {}
+            for device in ("cpu", "cuda"):
+                run = folder / f"{path.stem}_{device}"
+                code = grainscale(["run", str(path), "--out", str(run), "--quiet",
+                                   "--threads", "1", "--device", device])
+                assert code == 0, (path.stem, device, code)
+                hist[device] = read_columns(run / "history.csv")
+            res = {"rows": len(hist["cpu"]["step"]), "last": {}}
+            for name, a in hist["cpu"].items():
+                a, b = np.asarray(a), np.asarray(hist["cuda"][name])
+                res[name] = rel(a, b)
+                res["last"][name] = float(a[-1])
+            out[path.stem] = res
     return out
 
 
@@ -164,6 +242,9 @@ def main() -> None:
     res["reverse_overflow"] = compare(cpu, gpu)
     res["reverse_overflow"]["named"] = int(np.count_nonzero(gpu.nbr_j[0] == len(pos) - 1))
     res["reverse_overflow"]["longest_row"] = int(cpu.nbr_count.max())
+
+    # 6. the coupled runs: the MPM on the CPU, the RVEs on the device
+    res["coupled"] = coupled_runs()
     res["seconds"] = time.perf_counter() - t0
     print(json.dumps(res))
 
