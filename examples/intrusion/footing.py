@@ -31,7 +31,7 @@ its reaction over its base in the slice (b times the slice's thickness); N_q = q
 read as the mean over the last half of the settlement (the plateau of the weightless
 bed) and as the maximum.
 Prints one line per run and, last, one JSON object with every figure. A run that fails
-(points thrown out of the grid: weightless beds on 16 cells over B do so beyond ~0.2 B)
+(points thrown out of the grid: one-point beds on 32 cells over B do so beyond ~0.18 B)
 is reported with the settlement it reached, and the others go on.
 
 At 20 deg the pressure levels off from 0.03 B; at 30 deg it still rises at 0.1 B, so

@@ -35,6 +35,7 @@ VELOCITY_UPDATES = ("apic", "flip", "aflip")
 _SOLVER = SolverCfg()  # the case file's defaults are the only ones
 _DAMPING = DampingCfg()
 MASS_TOL = 1e-9  # nodes lighter than this fraction of the heaviest point carry no velocity
+LIGHT_MASS_TOL = 1e-4  # lighter nodes give C_p their force-free velocity
 CONTACT_MASS_TOL = 1e-2  # lighter nodes of a penalty contact's zone get no force
 
 
@@ -285,6 +286,32 @@ def integrate_grid(s: MPMState, dt: float) -> None:
     s.v_new = v
 
 
+def affine_velocity(s: MPMState, v: np.ndarray) -> np.ndarray:
+    """The nodal velocity whose gradient the points' affine field C_p takes (APIC,
+    AFLIP): v_new, except at nodes lighter than LIGHT_MASS_TOL of a point, which take
+    the velocity they would have without this step's force.
+
+    A node holding a sliver of a point's mass (the point's GIMP domain overlapping its
+    support by delta) gets a force that grows like delta and a mass like delta^2; its
+    acceleration grows like 1/delta, and grad S_Ip like delta, so the sliver adds to C_p
+    a term that does not vanish as delta -> 0 and need not resemble the flow (a
+    footing's corner point was thrown out of the grid this way, docs/mpm.md). Only C_p
+    is spared: v_p and x_p take v_new (weighted by S_Ip ~ delta^2, the sliver's share
+    vanishes), so momentum is conserved as before, and C_p's own momentum in P2G is
+    zero for shape functions that reproduce linear fields.
+    """
+    light = (s.mass < LIGHT_MASS_TOL * s.m_point_max) & s.active
+    if s.velocity_update == "flip" or not light.any():
+        return v
+    p_free = s.mass[:, None] * s.v_old
+    impose(s, p_free, s.mass)
+    va = v.copy()
+    va[light] = p_free[light] / s.mass[light, None]
+    if nodes_contact(s):
+        va[s.rigid_nodes] = s.rigid_v
+    return va
+
+
 def g2p(s: MPMState, dt: float) -> None:
     """Point velocity (APIC, FLIP/PIC or AFLIP, seed Eq. 18) and position (seed Eq. 19)."""
     pts = s.points
@@ -297,9 +324,9 @@ def g2p(s: MPMState, dt: float) -> None:
         flip = math.exp(-dt / s.relaxation_time)
     else:
         flip = s.flip
-    g2p_kernel(s.v_mapped, s.v_new, s.base, s.w, s.dw, g.nodes, s.ns, dt, flip,
-               s.velocity_update != "flip", g.origin, g.upper, pts.x, pts.v, pts.C,
-               s.chunk_vmax, s.chunk_out)
+    g2p_kernel(s.v_mapped, s.v_new, affine_velocity(s, s.v_new), s.base, s.w, s.dw, g.nodes,
+               s.ns, dt, flip, s.velocity_update != "flip", g.origin, g.upper, pts.x, pts.v,
+               pts.C, s.chunk_vmax, s.chunk_out)
     n_out = int(s.chunk_out.sum())
     if g.periodic.any():
         g.wrap(pts.x)

@@ -289,7 +289,7 @@ def interpolate_kernel(field, base, w, nodes, ns, out):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x, v, C):
+def _g2p_point(p, vold, vnew, vaff, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x, v, C):
     ax = ay = az = ux = uy = uz = 0.0
     c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
     for k in range(ns):
@@ -315,15 +315,18 @@ def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x
                     dx = dw[p, 0, i] * wyz
                     dy = wx * gy * wz
                     dz = wx * wy * gz
-                    c00 += n0 * dx
-                    c01 += n0 * dy
-                    c02 += n0 * dz
-                    c10 += n1 * dx
-                    c11 += n1 * dy
-                    c12 += n1 * dz
-                    c20 += n2 * dx
-                    c21 += n2 * dy
-                    c22 += n2 * dz
+                    a0 = vaff[I, 0]
+                    a1 = vaff[I, 1]
+                    a2 = vaff[I, 2]
+                    c00 += a0 * dx
+                    c01 += a0 * dy
+                    c02 += a0 * dz
+                    c10 += a1 * dx
+                    c11 += a1 * dy
+                    c12 += a1 * dz
+                    c20 += a2 * dx
+                    c21 += a2 * dy
+                    c22 += a2 * dz
                 if flip > 0.0:
                     ax += S * (n0 - vold[I, 0])
                     ay += S * (n1 - vold[I, 1])
@@ -353,14 +356,14 @@ def _g2p_point(p, vold, vnew, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _g2p_task(t, nt, vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v, C,
+def _g2p_task(t, nt, vold, vnew, vaff, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v, C,
               vmax_out, nout_out):
     P = x.shape[0]
     for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
         vm = 0.0
         nout = 0
         for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
-            s2, out = _g2p_point(p, vold, vnew, base, w, dw, nodes[0], nodes[1], ns, dt, flip,
+            s2, out = _g2p_point(p, vold, vnew, vaff, base, w, dw, nodes[0], nodes[1], ns, dt, flip,
                                  apic, lo, hi, x, v, C)
             vm = max(vm, s2)
             if out:
@@ -369,13 +372,14 @@ def _g2p_task(t, nt, vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi,
         nout_out[c] = nout
 
 
-def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v, C, vmax_out,
+def g2p_kernel(vold, vnew, vaff, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v, C, vmax_out,
                nout_out):
     """Point velocity (seed Eq. 18) and position (seed Eq. 19) update.
 
     APIC (apic = True, flip = 0; Jiang et al. 2015, in the velocity-gradient form of
     Taylor PIC, Nakamura et al. 2023, which is exactly APIC for linear shape functions):
-        v_p <- sum S v_new,   C_p <- sum v_new (x) grad S
+        v_p <- sum S v_new,   C_p <- sum v_aff (x) grad S
+    (v_aff is v_new but at nodes holding a sliver of mass: step.affine_velocity)
     FLIP/PIC blend (apic = False; C_p is left untouched, zero):
         v_p <- flip (v_p + sum S (v_new - v_old)) + (1 - flip) sum S v_new
     with v_old the mapped grid velocity before the boundaries acted, so that their
@@ -384,7 +388,7 @@ def g2p_kernel(vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
     Per chunk: the largest point speed (for the CFL check) and the number of points
     whose centre left the grid box [lo, hi].
     """
-    parallel_for(_g2p_task, vold, vnew, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
+    parallel_for(_g2p_task, vold, vnew, vaff, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
                  C, vmax_out, nout_out)
 
 
