@@ -286,7 +286,7 @@ def integrate_grid(s: MPMState, dt: float) -> None:
     s.v_new = v
 
 
-def affine_velocity(s: MPMState, v: np.ndarray) -> np.ndarray:
+def affine_velocity(s: MPMState) -> np.ndarray:
     """The nodal velocity whose gradient the points' affine field C_p takes (APIC,
     AFLIP): v_new, except at nodes lighter than LIGHT_MASS_TOL of a point, which take
     the velocity they would have without this step's force.
@@ -302,10 +302,10 @@ def affine_velocity(s: MPMState, v: np.ndarray) -> np.ndarray:
     """
     light = (s.mass < LIGHT_MASS_TOL * s.m_point_max) & s.active
     if s.velocity_update == "flip" or not light.any():
-        return v
+        return s.v_new
     p_free = s.mass[:, None] * s.v_old
     impose(s, p_free, s.mass)
-    va = v.copy()
+    va = s.v_new.copy()
     va[light] = p_free[light] / s.mass[light, None]
     if nodes_contact(s):
         va[s.rigid_nodes] = s.rigid_v
@@ -324,7 +324,7 @@ def g2p(s: MPMState, dt: float) -> None:
         flip = math.exp(-dt / s.relaxation_time)
     else:
         flip = s.flip
-    g2p_kernel(s.v_mapped, s.v_new, affine_velocity(s, s.v_new), s.base, s.w, s.dw, g.nodes,
+    g2p_kernel(s.v_mapped, s.v_new, affine_velocity(s), s.base, s.w, s.dw, g.nodes,
                s.ns, dt, flip, s.velocity_update != "flip", g.origin, g.upper, pts.x, pts.v,
                pts.C, s.chunk_vmax, s.chunk_out)
     n_out = int(s.chunk_out.sum())
