@@ -40,14 +40,16 @@ def insert_spheres(n: int, rmin: float, rmax: float, porosity: float, seed: int
 
 
 def agitated_dense_state(n: int = 48, seed: int = 3, damping: float = 0.0,
-                         friction: float = 0.4) -> tuple[RVEBatch, engine.ContactParams, float]:
+                         friction: float = 0.4, radii: tuple[float, float] = (1.0e-3, 1.3e-3),
+                         compress_steps: int = 600) -> tuple[RVEBatch, engine.ContactParams, float]:
     """A small dense-ish RVE with contacts, tangential history and random velocities.
 
-    Spheres (r 1.0-1.3 mm, density 2500) inserted at porosity 0.70, then compressed by a
-    prescribed volumetric rate with some shear so that many contacts form with history.
-    Returns (batch, params, dt).
+    Spheres (r uniform in `radii`, 1.0-1.3 mm by default, density 2500) inserted at
+    porosity 0.70, then compressed by a prescribed volumetric rate with some shear so that
+    many contacts form with history (over `compress_steps` steps of the critical step
+    scaled by 0.1). Returns (batch, params, dt).
     """
-    h, pos, radii = insert_spheres(n, 1.0e-3, 1.3e-3, 0.70, seed)
+    h, pos, radii = insert_spheres(n, radii[0], radii[1], 0.70, seed)
     b = from_packing(h, pos, radii, 2500.0)
     p = engine.ContactParams(young=5e6, stiffness_ratio=0.7, friction=friction,
                              damping=damping, skin=0.3e-3)
@@ -56,6 +58,6 @@ def agitated_dense_state(n: int = 48, seed: int = 3, damping: float = 0.0,
     b.v[0] = rng.normal(0.0, 0.02, (n, 3))
     b.w[0] = rng.normal(0.0, 20.0, (n, 3))
     lc = np.array([[-80.0, 3.0, 0.0], [0.0, -80.0, 2.0], [1.0, 0.0, -80.0]])
-    engine.advance(b, 600, dt, p, engine.rate_control(1, l_ctrl=lc, max_rate=100.0))
+    engine.advance(b, compress_steps, dt, p, engine.rate_control(1, l_ctrl=lc, max_rate=100.0))
     assert b.ncontact[0] > n // 2, "helper should produce a contact network"
     return b, p, dt

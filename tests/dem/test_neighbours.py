@@ -39,8 +39,8 @@ def list_entries(b, r=0):
 
 @pytest.mark.parametrize("shear", [0.0, 0.3])
 def test_list_equals_brute_force_after_build(small_packing, shear):
-    """Every pair within 2 r_max + skin (over all 27 images) is listed exactly once, with
-    its image, and nothing else; in the generated cube and in a sheared cell."""
+    """Every pair closer than r_i + r_j + skin (over all 27 images) is listed exactly
+    once, with its image, and nothing else; in the generated cube and in a sheared cell."""
     b = small_packing.copy()
     side = b.h[0, 0, 0]
     b.h[0] = b.h[0] + np.array([[0, 0.1, shear], [0, 0, -0.5 * shear], [0, 0, 0]]) * side
@@ -48,12 +48,16 @@ def test_list_equals_brute_force_after_build(small_packing, shear):
     p = contact_params_for(b)
     engine.refresh(b, p)
     assert b.need_rebuild[0] == 0
-    cutoff = 2 * b.radius.max() + p.skin
+    rad = b.radius[0]
     entries = list_entries(b)
     assert len(entries) == len(set(entries))  # no duplicates
-    expected = brute_pairs(b.h[0], b.s[0], b.radius[0],
-                           lambda i, j: np.full(len(i), cutoff))
+    expected = brute_pairs(b.h[0], b.s[0], rad, lambda i, j: rad[i] + rad[j] + p.skin)
     assert set(entries) == expected
+    # the packing's radii spread enough for the pair cutoff to matter: the common cutoff
+    # 2 r_max + skin would list at least a third more pairs
+    common = brute_pairs(b.h[0], b.s[0], rad,
+                         lambda i, j: np.full(len(i), 2 * rad.max() + p.skin))
+    assert len(common) > 1.33 * len(expected)
     assert np.all((b.s >= 0) & (b.s < 1))  # positions wrapped at the build
 
 
@@ -61,11 +65,16 @@ def contact_params_for(b):
     return contact_params(SMALL_PARAMS)
 
 
-def test_every_touching_pair_is_listed_at_every_step():
+# the wide radii take 0.43 x the time step (m_min / r_max): 1400 steps reach the strain
+@pytest.mark.parametrize(("radii", "compress"), [((1.0e-3, 1.3e-3), 600),
+                                                 ((0.6e-3, 1.5e-3), 1400)])
+def test_every_touching_pair_is_listed_at_every_step(radii, compress):
     """Between rebuilds the list must contain every pair in contact (the skin criterion
-    accounts for fluctuating motion and for the cell deformation). Checked step by step
-    against brute force in an agitated, compressed and sheared 48-sphere RVE."""
-    b, p, dt = agitated_dense_state()
+    accounts for fluctuating motion and for the cell deformation, for each pair's own
+    cutoff r_i + r_j + skin; kernel.py). Checked step by step against brute force in an
+    agitated, compressed and sheared 48-sphere RVE, with narrow and wide radii (where the
+    smallest pairs' cutoffs lie far below the common 2 r_max + skin)."""
+    b, p, dt = agitated_dense_state(radii=radii, compress_steps=compress)
     lc = np.array([[-40.0, 15.0, 0.0], [0.0, 30.0, -10.0], [5.0, 0.0, -20.0]])
     ctrl = engine.rate_control(1, l_ctrl=lc, max_rate=100.0)
     builds = 0

@@ -15,10 +15,11 @@ RveState and Controls arrays, `link` aside) is copied to the device once per cal
 `advance_batch` and back at its end, so one `engine.advance` (one MPM step) costs one
 round trip, plus one per capacity regrowth. Per step of an RVE:
 
-1. list build, if flagged: brute force over pairs j > i. A cell at least twice the
-   cutoff wide (checked, else TOO_THIN) has at most one image of j within the cutoff of
-   i, the one with fractional offset s_j + k - s_i in (-1/2, 1/2) per axis: k is found
-   by rounding, one distance per pair. Rows hold j in increasing order (the CPU's cell
+1. list build, if flagged: brute force over pairs j > i, each listed when closer than
+   r_i + r_j + skin (as on the CPU). A cell at least twice the largest cutoff 2 r_max +
+   skin wide (checked, else TOO_THIN) has at most one image of j within it of i, the
+   one with fractional offset s_j + k - s_i in (-1/2, 1/2) per axis: k is found by
+   rounding, one distance per pair. Rows hold j in increasing order (the CPU's cell
    list gives another order, the same pairs and image codes); the tangential history of
    a persisting pair is carried over by matching (j, image) after re-wrapping, as
    `neighbours.build` does. A count pass first, so an overflow (OVERFLOW, needed row
@@ -166,8 +167,9 @@ def _max_row(red, res, q, tid):
 
 
 @cuda.jit(device=True)
-def _nearest_image(sw, r, i, j, h, cut2):
-    """Image code (0..26) of the image of j within the cutoff of i, or -1 if none.
+def _nearest_image(sw, r, i, j, h, radius, skin):
+    """Image code (0..26) of the image of j closer to i than r_i + r_j + skin, or -1 if
+    none.
 
     sw holds wrapped fractional positions in [0, 1); k_a = -round(s_j - s_i)_a is the
     only candidate when every perpendicular width is at least twice the cutoff
@@ -182,21 +184,21 @@ def _nearest_image(sw, r, i, j, h, cut2):
     d0 = h[0, 0] * f0 + h[0, 1] * f1 + h[0, 2] * f2
     d1 = h[1, 0] * f0 + h[1, 1] * f1 + h[1, 2] * f2
     d2 = h[2, 0] * f0 + h[2, 1] * f1 + h[2, 2] * f2
-    if d0 * d0 + d1 * d1 + d2 * d2 < cut2:
+    cij = radius[r, i] + radius[r, j] + skin  # as neighbours._scan
+    if d0 * d0 + d1 * d1 + d2 * d2 < cij * cij:
         return (int(a) + 1) * 9 + (int(b) + 1) * 3 + (int(c) + 1)
     return -1
 
 
 @cuda.jit(device=True)
-def _build(r, g, tid, nthr, h, s, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, wrapv,
-           sw, old_j, old_code, old_ft, cutoff, red, res):
+def _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
+           wrapv, sw, old_j, old_code, old_ft, skin, cutoff, red, res):
     """Rebuild the half list of RVE r on its block (collective: every thread calls it);
     returns (status, largest row length needed), the same in every thread, as
     neighbours.build. On success s is wrapped into [0, 1), s_ref and h_ref record the
     build, and every surviving pair keeps its history ft."""
     n = s.shape[1]
     cap = nbr_j.shape[2]
-    cut2 = cutoff * cutoff
     hr = h[r]
     if _min_width(hr) < 2.0 * cutoff:  # the same arithmetic in every thread
         return TOO_THIN, 0
@@ -223,7 +225,7 @@ def _build(r, g, tid, nthr, h, s, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
     for i in range(tid, n, nthr):
         c = 0
         for j in range(i + 1, n):
-            if _nearest_image(sw, r, i, j, hr, cut2) >= 0:
+            if _nearest_image(sw, r, i, j, hr, radius, skin) >= 0:
                 c += 1
         need = _max(need, c)
     red[0, tid] = need
@@ -250,7 +252,7 @@ def _build(r, g, tid, nthr, h, s, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
             old_ft[g, i, k, 2] = ft[r, i, k, 2]
         cnew = 0
         for j in range(i + 1, n):
-            code = _nearest_image(sw, r, i, j, hr, cut2)
+            code = _nearest_image(sw, r, i, j, hr, radius, skin)
             if code < 0:
                 continue
             nbr_j[r, i, cnew] = j
@@ -265,6 +267,10 @@ def _build(r, g, tid, nthr, h, s, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
                     ft[r, i, cnew, 2] = old_ft[g, i, q, 2]
                     break
             cnew += 1
+        for k in range(cnew, m):  # slots out of use hold zeros, as on the CPU
+            ft[r, i, k, 0] = 0.0
+            ft[r, i, k, 1] = 0.0
+            ft[r, i, k, 2] = 0.0
         nbr_count[r, i] = cnew
     cuda.syncthreads()  # every row re-mapped wrapv of others before s changes
     for i in range(tid, n, nthr):
@@ -693,9 +699,9 @@ def _make_kernel(nthr: int):
             for step in range(nst):
                 # 1. neighbour list, if the last step's check asked for it
                 if need_rebuild[r] != 0:
-                    code, needed = _build(r, g, tid, nthr, h, s, nbr_j, nbr_shift, nbr_count,
-                                          ft, s_ref, h_ref, wrapv, x, old_j, old_code, ent,
-                                          cutoff, red, res)
+                    code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
+                                          nbr_count, ft, s_ref, h_ref, wrapv, x, old_j,
+                                          old_code, ent, skin, cutoff, red, res)
                     if tid == 0:
                         out[r, 3] = needed
                     if code != OK:

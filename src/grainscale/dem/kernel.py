@@ -34,8 +34,11 @@ Per step of one RVE (dt fixed), in the order the code runs:
    accumulated rotation += |w| dt.
 7. list check: flag a rebuild (done at 1 of the next step) when
    2 max|u'| + |h h_ref^-1 - I|_F cutoff >= skin (u' = h (s - s_ref) the fluctuating
-   displacement since the build, bounded by sqrt(|h|_1 |h|_inf) |s - s_ref|): no pair
-   can then have entered the cutoff unseen.
+   displacement since the build, bounded by sqrt(|h|_1 |h|_inf) |s - s_ref|, and
+   cutoff = 2 r_max + skin). Until then no unlisted pair touches: it had |d_ref| >=
+   c_ij = r_i + r_j + skin at the build (neighbours.py) and now d = F d_ref + h (ds_j -
+   ds_i) with F = h h_ref^-1, so |d| >= (1 - |F - I|_F) c_ij - 2 max|u'| >= c_ij -
+   (|F - I|_F cutoff + 2 max|u'|) > r_i + r_j, as c_ij <= cutoff.
 
 The kernels take their arguments as three named tuples: `RveState` (the arrays of the
 RVEs, state and scratch), `ContactLaw` (the constants of the contact law, damping and

@@ -1,11 +1,16 @@
 """Verlet half neighbour lists for a periodic, possibly sheared cell.
 
+A pair (i, j) is listed when |d| < r_i + r_j + skin, its own cutoff: with radii spread
+over a factor of 2 or more, the common cutoff 2 r_max + skin would list about twice as
+many pairs that cannot touch (6.6 against 3.5 entries per particle in the column's
+300-sphere RVE), each of which the contact pass reads every step (docs/performance.md).
 Built from a cell list in fractional coordinates: bins are cut along each cell axis so
-that a bin's perpendicular width is at least the cutoff 2 r_max + skin, so every pair
-within the cutoff lies in the 27 bins around a particle, and the bin offset fixes the
-image shift. Lists are rebuilt when a pair could have moved by more than the skin
-(`kernel.py` tracks that); rebuilding wraps positions back into the cell and carries each
-contact's tangential history over to its new list slot.
+that a bin's perpendicular width is at least the largest cutoff 2 r_max + skin, so every
+listed pair lies in the 27 bins around a particle, and the bin offset fixes the image
+shift. Lists are rebuilt when a pair could have moved by more than the skin (`kernel.py`
+tracks that; its bound holds for each pair's cutoff, see there); rebuilding wraps
+positions back into the cell and carries each contact's tangential history over to its
+new list slot.
 
 Status codes returned by `build`: 0 ok, 1 capacity overflow (nothing was modified; the
 driver regrows the capacity and retries), 2 cell thinner than twice the cutoff, 3 a
@@ -90,7 +95,6 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
     for i in range(n):
         rmax = max(rmax, radius[i])
     cutoff = 2.0 * rmax + skin
-    cut2 = cutoff * cutoff
     widths = perpendicular_widths(h)
     if widths.min() < 2.0 * cutoff:
         return Status.TOO_THIN, 0
@@ -120,7 +124,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
     # pass 1: count only, so that an overflow leaves the state untouched
     need = 0
     for i in range(n):
-        c = _scan(i, h, sw, nb, head, nxt, cut2, nbr_j, nbr_shift, False)
+        c = _scan(i, h, sw, radius, skin, nb, head, nxt, nbr_j, nbr_shift, False)
         need = max(need, c)
     if need > cap:
         return Status.OVERFLOW, need
@@ -143,7 +147,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
             old_ft[k, 0] = ft[i, k, 0]
             old_ft[k, 1] = ft[i, k, 1]
             old_ft[k, 2] = ft[i, k, 2]
-        cnew = _scan(i, h, sw, nb, head, nxt, cut2, nbr_j, nbr_shift, True)
+        cnew = _scan(i, h, sw, radius, skin, nb, head, nxt, nbr_j, nbr_shift, True)
         nbr_count[i] = cnew
         for k in range(cnew):
             j = nbr_j[i, k]
@@ -157,6 +161,10 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
                     ft[i, k, 1] = old_ft[q, 1]
                     ft[i, k, 2] = old_ft[q, 2]
                     break
+        for k in range(cnew, m):  # slots out of use hold zeros: a checkpoint that cuts
+            ft[i, k, 0] = 0.0     # them off restores the same arrays
+            ft[i, k, 1] = 0.0
+            ft[i, k, 2] = 0.0
     for i in range(n):
         for k in range(3):
             s[i, k] = sw[i, k]
@@ -168,8 +176,9 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
 
 
 @njit(cache=True)
-def _scan(i, h, sw, nb, head, nxt, cut2, nbr_j, nbr_shift, write):
-    """Visit the 27 bins around particle i; count (and optionally write) pairs j > i."""
+def _scan(i, h, sw, radius, skin, nb, head, nxt, nbr_j, nbr_shift, write):
+    """Visit the 27 bins around particle i; count (and optionally write) the pairs j > i
+    closer than r_i + r_j + skin."""
     b0 = min(int(sw[i, 0] * nb[0]), nb[0] - 1)
     b1 = min(int(sw[i, 1] * nb[1]), nb[1] - 1)
     b2 = min(int(sw[i, 2] * nb[2]), nb[2] - 1)
@@ -195,7 +204,8 @@ def _scan(i, h, sw, nb, head, nxt, cut2, nbr_j, nbr_shift, write):
                         d0 = h[0, 0] * f0 + h[0, 1] * f1 + h[0, 2] * f2
                         d1 = h[1, 0] * f0 + h[1, 1] * f1 + h[1, 2] * f2
                         d2 = h[2, 0] * f0 + h[2, 1] * f1 + h[2, 2] * f2
-                        if d0 * d0 + d1 * d1 + d2 * d2 < cut2:
+                        c = radius[i] + radius[j] + skin
+                        if d0 * d0 + d1 * d1 + d2 * d2 < c * c:
                             if write:
                                 nbr_j[i, count] = j
                                 nbr_shift[i, count] = shift_code(sh0, sh1, sh2)

@@ -6,7 +6,7 @@ coordinates `s` (see cell.py); velocities `v` are the *fluctuating* part (the me
 velocity L x is added where a relative velocity needs it).
 
 Neighbour lists are half lists with a fixed capacity K per particle: row i holds the
-particles j > i within the cutoff 2 r_max + skin at the last build, each with its image
+particles j > i closer than r_i + r_j + skin at the last build, each with its image
 shift encoded as one byte (27 values, 13 = no shift) and its tangential contact force
 history `ft` (force on i, N). Capacity is regrown outside compiled code on overflow.
 """
