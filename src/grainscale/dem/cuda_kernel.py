@@ -17,7 +17,7 @@ round trip, plus one per capacity regrowth. Per step of an RVE:
 
 1. list build, if flagged: brute force over pairs j > i, each listed when closer than
    r_i + r_j + skin (as on the CPU). A cell at least twice the largest cutoff 2 r_max +
-   skin wide (checked, else TOO_THIN) has at most one image of j within it of i, the
+   skin wide (checked, else TOO_THIN) has at most one image of j that close to i, the
    one with fractional offset s_j + k - s_i in (-1/2, 1/2) per axis: k is found by
    rounding, one distance per pair. Rows hold j in increasing order (the CPU's cell
    list gives another order, the same pairs and image codes); the tangential history of
@@ -172,9 +172,9 @@ def _nearest_image(sw, r, i, j, h, radius, skin):
     none.
 
     sw holds wrapped fractional positions in [0, 1); k_a = -round(s_j - s_i)_a is the
-    only candidate when every perpendicular width is at least twice the cutoff
-    (|s_j + k - s_i|_a <= |d| / w_a < 1/2). The distance is computed as `neighbours._scan`
-    computes it, (s_j + k) - s_i mapped by h."""
+    only candidate when every perpendicular width is at least twice the largest cutoff
+    2 r_max + skin (|s_j + k - s_i|_a <= |d| / w_a < 1/2). The distance is computed as
+    `neighbours._scan` computes it, (s_j + k) - s_i mapped by h."""
     a = -math.floor(sw[r, j, 0] - sw[r, i, 0] + 0.5)
     b = -math.floor(sw[r, j, 1] - sw[r, i, 1] + 0.5)
     c = -math.floor(sw[r, j, 2] - sw[r, i, 2] + 0.5)

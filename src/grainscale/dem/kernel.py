@@ -37,8 +37,9 @@ Per step of one RVE (dt fixed), in the order the code runs:
    displacement since the build, bounded by sqrt(|h|_1 |h|_inf) |s - s_ref|, and
    cutoff = 2 r_max + skin). Until then no unlisted pair touches: it had |d_ref| >=
    c_ij = r_i + r_j + skin at the build (neighbours.py) and now d = F d_ref + h (ds_j -
-   ds_i) with F = h h_ref^-1, so |d| >= (1 - |F - I|_F) c_ij - 2 max|u'| >= c_ij -
-   (|F - I|_F cutoff + 2 max|u'|) > r_i + r_j, as c_ij <= cutoff.
+   ds_i) with F = h h_ref^-1, so, as |F - I|_2 <= |F - I|_F < skin/cutoff < 1 until
+   then, |d| >= (1 - |F - I|_F) c_ij - 2 max|u'| >= c_ij - (|F - I|_F cutoff +
+   2 max|u'|) > r_i + r_j, since c_ij <= cutoff.
 
 The kernels take their arguments as three named tuples: `RveState` (the arrays of the
 RVEs, state and scratch), `ContactLaw` (the constants of the contact law, damping and

@@ -13,9 +13,9 @@ positions back into the cell and carries each contact's tangential history over 
 new list slot.
 
 Status codes returned by `build`: 0 ok, 1 capacity overflow (nothing was modified; the
-driver regrows the capacity and retries), 2 cell thinner than twice the cutoff, 3 a
-position not finite (nothing was modified: a NaN would give a bin index outside the
-cell list).
+driver regrows the capacity and retries), 2 cell thinner than twice the largest cutoff
+2 r_max + skin, 3 a position not finite (nothing was modified: a NaN would give a bin
+index outside the cell list).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ class Status(IntEnum):
 
     OK = 0
     OVERFLOW = 1  # a neighbour list needs more capacity; the caller regrows and redoes
-    TOO_THIN = 2  # a perpendicular cell width is below twice the cutoff
+    TOO_THIN = 2  # a perpendicular cell width is below 2 (2 r_max + skin)
     NOT_FINITE = 3  # a non-finite position (NaN or infinite fractional coordinate)
 
 

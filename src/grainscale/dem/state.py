@@ -167,7 +167,7 @@ def padded(arrays: dict[str, np.ndarray], n: int, k: int) -> dict[str, np.ndarra
     k neighbour slots, so RVEs of different sizes fit in one table (checkpoints). The
     padding is inert: empty neighbour rows, spheres of zero radius, cut off on reading.
     Slots beyond k are dropped: k must be at least every row's nbr_count (the slots
-    past a row's count hold nothing)."""
+    past a row's count are never read)."""
     out = {}
     for name, v in arrays.items():
         if name in SLOT_FIELDS and v.shape[2] > k:
