@@ -83,6 +83,15 @@ def compare(cpu: RVEBatch, gpu: RVEBatch) -> dict:
     return out
 
 
+def pairs_within(b: RVEBatch, cutoff: float) -> int:
+    """Pairs i < j of RVE 0 closer than `cutoff` over the 27 nearest images (numpy)."""
+    s = b.s[0] - np.floor(b.s[0])
+    images = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
+    iu, ju = np.triu_indices(b.n_particles, 1)
+    ds = (s[ju] - s[iu])[:, None, :] + images[None]
+    return int(np.count_nonzero(np.linalg.norm(ds @ b.h[0].T, axis=2) < cutoff))
+
+
 def unit_element(folder: Path) -> Path:
     """examples/unit_element/case.toml shrunk to one material point: a 10 mm cube in a
     20 mm cell (the same strain rate, 0.1 /s, and lateral tractions of 100 kPa on its
@@ -243,7 +252,22 @@ def main() -> None:
     res["reverse_overflow"]["named"] = int(np.count_nonzero(gpu.nbr_j[0] == len(pos) - 1))
     res["reverse_overflow"]["longest_row"] = int(cpu.nbr_count.max())
 
-    # 6. the coupled runs: the MPM on the CPU, the RVEs on the device
+    # 6. radii spread 2.5x (0.6-1.5 mm): each pair's own cutoff r_i + r_j + skin lists
+    # far fewer pairs than the common 2 r_max + skin; both builds must list the same
+    # ones. One RVE of 48 spheres, rebuilt at the start and sheared through 12 steps
+    wide, pw, dtw = agitated_dense_state(n=48, seed=11, radii=(0.6e-3, 1.5e-3),
+                                         compress_steps=1400)
+    wide.need_rebuild[:] = 1
+    cpu, gpu = wide.copy(), wide.copy()
+    shear = engine.rate_control(1, l_ctrl=[[0.0, 400.0, 0.0], [0.0, 0.0, 0.0],
+                                           [0.0, 0.0, -20.0]], max_rate=50.0)
+    engine.advance(cpu, 12, dtw, pw, shear)
+    engine.advance(gpu, 12, dtw, pw, shear, device="cuda")
+    res["wide"] = compare(cpu, gpu)
+    res["wide"]["listed"] = int(gpu.nbr_count.sum())
+    res["wide"]["common"] = pairs_within(gpu, 2.0 * gpu.radius.max() + pw.skin)
+
+    # 7. the coupled runs: the MPM on the CPU, the RVEs on the device
     res["coupled"] = coupled_runs()
     res["seconds"] = time.perf_counter() - t0
     print(json.dumps(res))

@@ -109,6 +109,18 @@ def test_damping_dashpot_idle_threads_and_an_rve_without_steps(sim):
     assert res["untouched"]  # the RVE given 0 steps keeps its state and reports
 
 
+def test_pair_cutoffs_of_widely_spread_radii_list_the_same_pairs(sim):
+    """Radii 0.6-1.5 mm: the device's brute-force build and the CPU's cell list keep the
+    pairs within r_i + r_j + skin, the same ones, through 12 sheared steps."""
+    res = sim["wide"]
+    assert res["same_counts"] and res["same_pairs"]
+    for name in ARRAYS:
+        assert res[name] < RTOL, (name, res[name])
+    # the common cutoff 2 r_max + skin would list well over a third more: the case
+    # tells pair cutoffs from it
+    assert res["common"] > 1.33 * res["listed"], (res["common"], res["listed"])
+
+
 def test_device_runs_are_bitwise_reproducible(sim):
     # the simulator interleaves its threads freely, so this also covers the order of
     # the integer atomics of the reverse list (sorted before use)
