@@ -22,7 +22,7 @@ import numpy as np
 import tomli_w
 
 sys.path.insert(0, str(Path(__file__).parent))
-from dem_helpers import agitated_dense_state  # noqa: E402
+from dem_helpers import agitated_dense_state, brute_pairs  # noqa: E402
 
 from grainscale.analysis import read_columns  # noqa: E402
 from grainscale.cli import main as grainscale  # noqa: E402
@@ -81,15 +81,6 @@ def compare(cpu: RVEBatch, gpu: RVEBatch) -> dict:
                                 and np.array_equal(cpu.need_rebuild, gpu.need_rebuild)),
                capacity=[cpu.capacity, gpu.capacity])
     return out
-
-
-def pairs_within(b: RVEBatch, cutoff: float) -> int:
-    """Pairs i < j of RVE 0 closer than `cutoff` over the 27 nearest images (numpy)."""
-    s = b.s[0] - np.floor(b.s[0])
-    images = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
-    iu, ju = np.triu_indices(b.n_particles, 1)
-    ds = (s[ju] - s[iu])[:, None, :] + images[None]
-    return int(np.count_nonzero(np.linalg.norm(ds @ b.h[0].T, axis=2) < cutoff))
 
 
 def unit_element(folder: Path) -> Path:
@@ -265,7 +256,9 @@ def main() -> None:
     engine.advance(gpu, 12, dtw, pw, shear, device="cuda")
     res["wide"] = compare(cpu, gpu)
     res["wide"]["listed"] = int(gpu.nbr_count.sum())
-    res["wide"]["common"] = pairs_within(gpu, 2.0 * gpu.radius.max() + pw.skin)
+    common = 2.0 * gpu.radius.max() + pw.skin
+    res["wide"]["common"] = len(brute_pairs(gpu.h[0], gpu.s[0] - np.floor(gpu.s[0]),
+                                            gpu.radius[0], lambda i, j: np.full(len(i), common)))
 
     # 7. the coupled runs: the MPM on the CPU, the RVEs on the device
     res["coupled"] = coupled_runs()

@@ -2,15 +2,32 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from grainscale.config.rve import RVEParams
 from grainscale.dem import engine
+from grainscale.dem.neighbours import shift_code
 from grainscale.dem.state import RVEBatch, from_packing
+
+IMAGES = np.array(list(itertools.product((-1, 0, 1), repeat=3)))  # the 27 image shifts
 
 # parameters of the small generated packing shared by several tests (unit-element
 # parameters of the seed, fewer particles)
 SMALL_PARAMS = RVEParams(particles=150, preparation={"pressure": 100e3, "porosity": 0.373})
+
+
+def brute_pairs(h, s, radius, cutoff_of_pair):
+    """{(i, j, shift code)} of all i < j with |h (s_j - s_i + k)| < cutoff_of_pair(i, j),
+    k over the 27 images (s in [0,1) so these are all candidates within half a cell)."""
+    n = len(radius)
+    iu, ju = np.triu_indices(n, 1)
+    ds = (s[ju] - s[iu])[:, None, :] + IMAGES[None]
+    dist = np.linalg.norm(ds @ h.T, axis=2)
+    cut = cutoff_of_pair(iu, ju)
+    p, k = np.nonzero(dist < cut[:, None])
+    return {(int(iu[a]), int(ju[a]), shift_code(*IMAGES[c])) for a, c in zip(p, k, strict=True)}
 
 
 def cartesian(batch: RVEBatch, r: int = 0) -> np.ndarray:
