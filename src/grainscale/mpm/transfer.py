@@ -471,16 +471,19 @@ class Transfer:
         # outside the fastmath kernels, and no NaN reduced
         bad = not (np.isfinite(v).all() and np.isfinite(C).all())
         # |v_p + C_p (x_I - x_p)| <= |v|max + max_a sum_b |C_ab| * 2 h: a stencil node lies
-        # within 2 cells of its point
+        # within 2 cells of its point. Its two maxima are reduced over ranks apart: the
+        # maximum of per-rank sums is not the sum of the global maxima, and a scale that
+        # depended on the split would round the momentum differently on other ranks
         reach = 2.0 * float(grid.cell_size.max())
-        vbound = (float(np.abs(v).max()) + reach * float(np.abs(C).sum(axis=2).max())
-                  if P and not bad else 0.0)
-        local = [float(m.max()) if P else 0.0, vbound, 1.0 if bad else 0.0]
+        ok = P and not bad
+        local = [float(m.max()) if P else 0.0, float(np.abs(v).max()) if ok else 0.0,
+                 float(np.abs(C).sum(axis=2).max()) if ok else 0.0, 1.0 if bad else 0.0]
         g = self.comm.max([*local, *stencil_box(base, ns)])
-        if g[2] > 0.0:
+        if g[3] > 0.0:
             return None, None, False
+        vbound = g[1] + reach * g[2]
         mscale = fixed_point_scale(self.n_global * g[0])
-        pscale = fixed_point_scale(self.n_global * g[0] * g[1])
+        pscale = fixed_point_scale(self.n_global * g[0] * vbound)
         nodes = grid.nodes
         if P:
             p2g_mass_momentum_kernel(m, v, C, x, grid.origin, grid.cell_size, base, w, nodes,
@@ -488,7 +491,7 @@ class Transfer:
             np.sum(self.buf4, axis=0, out=self.sum4)  # exact: integers
         else:
             self.sum4[:] = 0
-        self._reduce(self.sum4, nodes, g[3:])
+        self._reduce(self.sum4, nodes, g[4:])
         if self.fold is not None:
             self.fold(self.sum4)
         mass = self.sum4[:, 0] * (1.0 / mscale)
