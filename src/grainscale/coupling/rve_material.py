@@ -303,8 +303,7 @@ class RVEMaterial:
         n = len(self.theta_prev)
         self.spin_rate = np.asarray(state.get("spin_rate", np.zeros(n)), float).copy()
         self.work = np.asarray(state.get("work", np.zeros(n)), float).copy()
-        # no refresh here: re-evaluating contacts would re-project the tangential history
-        # at the saved positions, and a resumed run must continue bitwise
+        # no refresh: the saved stress and moduli are already those of the saved state
 
     def point_fields(self) -> dict[str, np.ndarray]:
         """Per-point RVE quantities for VTK frames and history: porosity, coordination,

@@ -323,11 +323,12 @@ def _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res):
 @cuda.jit(device=True)
 def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v, w, radius,
                   mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force, torque, x, tab, ent,
-                  rev, revc, red, res, homogenise):
+                  rev, revc, red, res, homogenise, commit, full_moduli):
     """Contact forces and torques of RVE r (kernel.contact_pass, same law and arithmetic
-    per contact); collective. Leaves in res: [0] contacts, [1] sum f_n [N] and, if
-    `homogenise`, [2..10] sum d (x) F - sum m v (x) v (row-major) and [11..16] the
-    affine stiffness sums c00, c11, c22, c01, c02, c12 (neither divided by V yet)."""
+    per contact, the history written only if `commit`); collective. Leaves in res: [0]
+    contacts, [1] sum f_n [N] and, if `homogenise`, [2..10] sum d (x) F - sum m v (x) v
+    (row-major) and [11..16] the affine moduli sums c00, c11, c22, c01, c02, c12 (kt's
+    part only with `full_moduli`; neither divided by V yet)."""
     n = s.shape[1]
     cap = nbr_j.shape[2]
     # x = h s; the image table was filled by thread 0 from the same h
@@ -351,6 +352,8 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
     c00 = c11 = c22 = c01 = c02 = c12 = 0.0
     ncontact = 0.0
     fsum = 0.0
+    kt_mod = kt_ratio if full_moduli else 0.0
+    geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
     cuda.syncthreads()  # every x written
     for i in range(tid, n, nthr):
         xi0 = x[r, i, 0]
@@ -369,8 +372,9 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
             rr = ri + rj
             dist2 = d0 * d0 + d1 * d1 + d2 * d2
             if dist2 >= rr * rr:
-                for c in range(3):
-                    ft[r, i, k, c] = 0.0
+                if commit:
+                    for c in range(3):
+                        ft[r, i, k, c] = 0.0
                 for c in range(6):
                     ent[g, i, k, c] = 0.0  # adds nothing to j's sums
                 continue
@@ -421,9 +425,10 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
                 f0 *= sc
                 f1 *= sc
                 f2 *= sc
-            ft[r, i, k, 0] = f0
-            ft[r, i, k, 1] = f1
-            ft[r, i, k, 2] = f2
+            if commit:
+                ft[r, i, k, 0] = f0
+                ft[r, i, k, 1] = f1
+                ft[r, i, k, 2] = f2
             F0 = f0 - fn * n0
             F1 = f1 - fn * n1
             F2 = f2 - fn * n2
@@ -458,12 +463,14 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
                 q0 = dist * n0 * n0
                 q1 = dist * n1 * n1
                 q2 = dist * n2 * n2
-                c00 += kn * q0 * q0
-                c11 += kn * q1 * q1
-                c22 += kn * q2 * q2
-                c01 += kn * q0 * q1
-                c02 += kn * q0 * q2
-                c12 += kn * q1 * q2
+                kq = kt_mod * kn
+                fa = geo * (abs(fn) + math.sqrt(f0 * f0 + f1 * f1 + f2 * f2))
+                c00 += kn * q0 * q0 + kq * q0 * (dist - q0) + q0 * fa
+                c11 += kn * q1 * q1 + kq * q1 * (dist - q1) + q1 * fa
+                c22 += kn * q2 * q2 + kq * q2 * (dist - q2) + q2 * fa
+                c01 += (kn - kq) * q0 * q1
+                c02 += (kn - kq) * q0 * q2
+                c12 += (kn - kq) * q1 * q2
         force[r, i, 0] = fi0  # the row's sum; j's entries are added before it below
         force[r, i, 1] = fi1
         force[r, i, 2] = fi2
@@ -585,6 +592,22 @@ def _cell_control(r, dt, h, L, stress_servo, stiffness, e_step, l_mean, hdot_fix
                 + hdot[a, 2] * hinv[2, b]
             Ls[a, b] = la
             L[r, a, b] = la
+    _image_table(r, h, tab)
+
+
+@cuda.jit(device=True)
+def _end_frame(r, h, L, Ls, tab):
+    """Thread 0, before the end-of-increment evaluation: Ls <- L[r] (the last step's
+    velocity gradient) and the image table of the current cell."""
+    for a in range(3):
+        for b in range(3):
+            Ls[a, b] = L[r, a, b]
+    _image_table(r, h, tab)
+
+
+@cuda.jit(device=True)
+def _image_table(r, h, tab):
+    """tab[k] = h k for the 27 image shifts k of RVE r's cell (thread 0)."""
     for a in range(-1, 2):
         for b in range(-1, 2):
             for c in range(-1, 2):
@@ -595,14 +618,11 @@ def _cell_control(r, dt, h, L, stress_servo, stiffness, e_step, l_mean, hdot_fix
 
 @cuda.jit(device=True)
 def _integrate(r, tid, nthr, dt, damping, v, w, s, s_ref, rot, force, torque, mass,
-               inertia, Ls, hinv, last, red):
+               inertia, Ls, hinv, red):
     """Step 6 for the thread's particles (kernel._translate and _rotate, same
-    arithmetic); red[0, tid] <- max |s - s_ref|^2, and on the last step red[1, tid],
-    red[2, tid] <- the thread's sums of |F| [N] and of the kinetic energy [J]."""
+    arithmetic); red[0, tid] <- max |s - s_ref|^2."""
     n = s.shape[1]
     umax2 = 0.0
-    fres = 0.0
-    ekin = 0.0
     for i in range(tid, n, nthr):
         im = dt / mass[r, i]
         f0 = force[r, i, 0]
@@ -647,12 +667,23 @@ def _integrate(r, tid, nthr, dt, damping, v, w, s, s_ref, rot, force, torque, ma
         w[r, i, 1] = a1
         w[r, i, 2] = a2
         rot[r, i] += math.sqrt(a0 * a0 + a1 * a1 + a2 * a2) * dt
-        if last:
-            fres += math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
-            ww = a0 * a0 + a1 * a1 + a2 * a2
-            vv = u0 * u0 + u1 * u1 + u2 * u2
-            ekin += 0.5 * (mass[r, i] * vv + inertia[r, i] * ww)
     red[0, tid] = umax2
+
+
+@cuda.jit(device=True)
+def _residuals(r, tid, nthr, force, v, w, mass, inertia, red):
+    """red[1, tid], red[2, tid] <- the thread's sums of |F| [N] and of the kinetic energy
+    [J] (kernel._residuals)."""
+    fres = 0.0
+    ekin = 0.0
+    for i in range(tid, v.shape[1], nthr):
+        f0 = force[r, i, 0]
+        f1 = force[r, i, 1]
+        f2 = force[r, i, 2]
+        fres += math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+        ww = w[r, i, 0] * w[r, i, 0] + w[r, i, 1] * w[r, i, 1] + w[r, i, 2] * w[r, i, 2]
+        vv = v[r, i, 0] * v[r, i, 0] + v[r, i, 1] * v[r, i, 1] + v[r, i, 2] * v[r, i, 2]
+        ekin += 0.5 * (mass[r, i] * vv + inertia[r, i] * ww)
     red[1, tid] = fres
     red[2, tid] = ekin
 
@@ -696,7 +727,7 @@ def _make_kernel(nthr: int):
             ncontact = 0.0
             fsum = 0.0
             rev_ok = False
-            for step in range(nst):
+            for _step in range(nst):
                 # 1. neighbour list, if the last step's check asked for it
                 if need_rebuild[r] != 0:
                     code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
@@ -718,32 +749,22 @@ def _make_kernel(nthr: int):
                         code = OVERFLOW
                         break
                     rev_ok = True
-                last = step == nst - 1
                 sample = servo_on and step_count[r] % SERVO_EVERY == 0
-                report = sample or (last and not servo_on)
                 # 2. cell control (thread 0), shared with the block
                 if tid == 0:
                     _cell_control(r, dt, h, L, stress_servo, stiffness, e_step, l_mean,
                                   hdot_fixed, l_ctrl, servo_mask, servo_target, servo_gain,
                                   max_rate, hnew, hinv, Ls, tab)
                 cuda.syncthreads()
-                # 3-4. contacts, and the stress the caller or the servo reads
-                homogenise = sample or last
+                # 3-4. contacts, and the stress the servo reads
                 _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v,
                               w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force,
-                              torque, x, tab, ent, rev, revc, red, res, homogenise)
+                              torque, x, tab, ent, rev, revc, red, res, sample, True, False)
                 ncontact = res[0]
                 fsum = res[1]
                 if tid == 0:
-                    if homogenise:
-                        if sample:
-                            _write_homogenised(r, h, res, stress_servo, stiffness, report)
-                            if last:
-                                for a in range(3):
-                                    for b in range(3):
-                                        stress[r, a, b] = stress_servo[r, a, b]
-                        else:
-                            _write_homogenised(r, h, res, stress, stiffness, report)
+                    if sample:
+                        _write_homogenised(r, h, res, stress_servo, stiffness, True)
                     step_count[r] += 1
                     # 5. new cell, its inverse for the position update
                     for a in range(3):
@@ -753,11 +774,9 @@ def _make_kernel(nthr: int):
                 cuda.syncthreads()
                 # 6. integration
                 _integrate(r, tid, nthr, dt, damping, v, w, s, s_ref, rot, force, torque,
-                           mass, inertia, Ls, hinv, last, red)
+                           mass, inertia, Ls, hinv, red)
                 _max_row(red, res, 0, tid)
                 umax2 = res[0]
-                if last:
-                    _sum_rows(red, res, 3, tid)  # res[0] is then max-free: not read
                 # 7. list check (thread 0), as kernel.advance_rve
                 if tid == 0:
                     hr = h[r]
@@ -779,11 +798,46 @@ def _make_kernel(nthr: int):
                             e2sum += m * m
                     if 2.0 * math.sqrt(umax2) + math.sqrt(e2sum) * cutoff >= skin:
                         need_rebuild[r] = 1
-                    if last:
-                        out[r, 1] = (res[1] / n) / (fsum / ncontact) if ncontact > 0 else 0.0
-                        out[r, 2] = res[2]
                 done += 1
                 cuda.syncthreads()  # need_rebuild and hinv settled before the next step
+            # 8. end of the increment (kernel.advance_rve): the caller's stress and moduli
+            # of the state reached, the history left as it is
+            if code == OK and nst != 0:
+                if need_rebuild[r] != 0:
+                    code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
+                                          nbr_count, ft, s_ref, h_ref, wrapv, x, old_j,
+                                          old_code, ent, skin, cutoff, red, res)
+                    if tid == 0:
+                        out[r, 3] = needed
+                    rev_ok = False
+                    cuda.syncthreads()  # need_rebuild read by all before thread 0 clears it
+                    if tid == 0 and code == OK:
+                        need_rebuild[r] = 0
+                if code == OK and not rev_ok:
+                    rneed = _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res)
+                    if rneed > rev.shape[2]:
+                        if tid == 0:
+                            out[r, 3] = _max(out[r, 3], float((rneed + 1) // 2))
+                        code = OVERFLOW
+                if code == OK:
+                    if tid == 0:  # the last step's L, and the image table of the new cell
+                        _end_frame(r, h, L, Ls, tab)
+                    cuda.syncthreads()
+                    _contact_pass(r, g, tid, nthr, 0.0, young, kt_ratio, friction, gamma, h,
+                                  s, v, w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft,
+                                  force, torque, x, tab, ent, rev, revc, red, res, True, False,
+                                  not servo_on)
+                    ncontact = res[0]
+                    fsum = res[1]
+                    if tid == 0:
+                        _write_homogenised(r, h, res, stress, stiffness, not servo_on)
+                    cuda.syncthreads()  # res read before the residuals overwrite it
+                    _residuals(r, tid, nthr, force, v, w, mass, inertia, red)
+                    _sum_rows(red, res, 3, tid)  # res[0] is then max-free: not read
+                    if tid == 0:
+                        out[r, 1] = (res[1] / n) / (fsum / ncontact) if ncontact > 0 else 0.0
+                        out[r, 2] = res[2]
+                    cuda.syncthreads()
             if tid == 0:
                 out[r, 0] = ncontact
                 out[r, 4] = done

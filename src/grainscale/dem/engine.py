@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import Numerics
@@ -20,10 +20,8 @@ from grainscale.dem.kernel import (
     Controls,
     RveState,
     advance_batch,
-    contact_pass,
-    rve_state,
 )
-from grainscale.dem.neighbours import Status, build
+from grainscale.dem.neighbours import Status
 from grainscale.dem.state import RVEBatch, grow_capacity
 
 
@@ -194,7 +192,9 @@ def check_device(device: str) -> None:
 
 def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
             control: Control, device: str = "cpu") -> RVEBatch:
-    """Advance every RVE by nsteps (int or (R,) array) steps of dt, in place.
+    """Advance every RVE by nsteps (int or (R,) array) steps of dt, in place; then each
+    RVE that stepped has the stress, moduli and contact count of the state it reached
+    (kernel.py, item 8). nsteps = -1: no step, only that evaluation (refresh).
 
     device "cpu" runs kernel.advance_batch (numba threads over RVEs), "cuda"
     cuda_kernel.advance_batch (one GPU block per RVE; the state goes to the device and
@@ -208,6 +208,9 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
 
         step_batch = cuda_kernel.advance_batch
     remaining = np.broadcast_to(np.asarray(nsteps, np.int64), (batch.n_rve,)).copy()
+    if np.any(remaining < -1):
+        raise ValueError(f"nsteps = {int(remaining.min())}: must be >= -1")
+    owed = remaining != 0  # the end-of-increment evaluation is still to be done
     status = np.zeros(batch.n_rve, np.int64)
     out = np.zeros((batch.n_rve, 5))
     r = batch.n_rve
@@ -219,15 +222,19 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
     ctl = Controls(float(dt), e_step, l_mean, control.hdot_fixed, control.l_ctrl,
                    control.servo_mask, control.servo_target, float(control.servo_gain),
                    max_rate)
-    while remaining.max() > 0:
-        # the state is read afresh each pass: a capacity regrowth replaces its arrays
-        step_batch(remaining, law, rve_arrays(batch), ctl, status, out)
+    while owed.any():
+        # the state is read afresh each pass: a capacity regrowth replaces its arrays.
+        # An RVE whose steps are done but whose evaluation a list overflow stopped is
+        # called with -1; one owing nothing with 0 (it keeps its outputs)
+        call = np.where(remaining > 0, remaining, np.where(owed, -1, 0))
+        step_batch(call, law, rve_arrays(batch), ctl, status, out)
         done = out[:, 4].astype(np.int64)
         remaining -= done
-        moved = done > 0  # an RVE that took no step in this call keeps its outputs
-        batch.ncontact[moved] = out[moved, 0]
-        batch.unbalanced[moved] = out[moved, 1]
-        batch.kinetic[moved] = out[moved, 2]
+        ended = owed & (remaining <= 0) & (status == Status.OK)
+        batch.ncontact[ended] = out[ended, 0]
+        batch.unbalanced[ended] = out[ended, 1]
+        batch.kinetic[ended] = out[ended, 2]
+        owed &= ~ended
         _check(batch, status, out)
     return batch
 
@@ -285,35 +292,10 @@ def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
             f"deformation; use more particles")
 
 
-@njit(cache=True, parallel=True)
-def _refresh(law, st, status, out):
-    for r in prange(st.s.shape[0]):
-        one = rve_state(st, r)
-        status[r] = Status.OK
-        if one.need_rebuild[0] != 0:
-            code, needed = build(one.h, one.s, one.radius, one.nbr_j, one.nbr_shift,
-                                 one.nbr_count, one.ft, one.s_ref, one.h_ref, one.link,
-                                 one.wrapv, one.x, law.skin)
-            out[r, 3] = needed
-            status[r] = code
-            if code != Status.OK:
-                continue
-            one.need_rebuild[0] = 0
-        table = np.empty((27, 3))
-        nc, _ = contact_pass(0.0, law, one, table, one.stress, one.stiffness, True)
-        out[r, 0] = nc
-
-
 def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
-    """Recompute forces, stress and stiffness of the current configuration (no motion)."""
-    status = np.zeros(batch.n_rve, np.int64)
-    out = np.zeros((batch.n_rve, 5))
-    law = contact_law(params)
-    while True:
-        _refresh(law, rve_arrays(batch), status, out)
-        _check(batch, status, out)
-        if not np.any(status == Status.OVERFLOW):
-            break
-    batch.ncontact[:] = out[:, 0]
+    """Evaluate forces, stress, moduli and contacts of the current configuration (no
+    motion, the tangential history left as it is): the end-of-increment evaluation of
+    `advance` alone, so refreshing a state that `advance` left changes nothing."""
+    advance(batch, -1, 0.0, params, rate_control(batch.n_rve))
     batch.stress_servo[:] = batch.stress
     return batch

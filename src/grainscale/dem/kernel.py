@@ -21,12 +21,11 @@ Per step of one RVE (dt fixed), in the order the code runs:
    the mean field carries a pair rigidly with its spin W = skew L, which only turns the
    contact frame), and particle spins w are fluctuations about W; a rigidly rotating
    cell therefore makes no slip at any contact (objectivity).
-4. in the same pass over the contacts, on servo samples and on the last step of a call:
-   Love-Weber stress sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the
-   first particle and d = x_j - x_i, so compression is negative (tension positive), minus
-   the kinetic stress (1/V) sum m v' (x) v' of the fluctuating velocities v', and
-   the affine stiffness C_ab. Without a servo, `stiffness` holds the last step's C (the
-   MPM's wave speed reads it).
+4. in the same pass over the contacts, on servo samples: Love-Weber stress
+   sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the first particle and
+   d = x_j - x_i, so compression is negative (tension positive), minus the kinetic
+   stress (1/V) sum m v' (x) v' of the fluctuating velocities v', and the normal
+   springs' affine stiffness C_ab (the servo's).
 5. h <- h_new, and h_new^-1 for 6.
 6. leapfrog with Cundall's local non-viscous damping on the fluctuating motion and the
    pseudo-force of the co-moving frame (SLLOD): v += dt (F - alpha |F| sign v)/m
@@ -40,6 +39,11 @@ Per step of one RVE (dt fixed), in the order the code runs:
    ds_i) with F = h h_ref^-1, so, as |F - I|_2 <= |F - I|_F < skin/cutoff < 1 until
    then, |d| >= (1 - |F - I|_F) c_ij - 2 max|u'| >= c_ij - (|F - I|_F cutoff +
    2 max|u'|) > r_i + r_j, since c_ij <= cutoff.
+8. after the call's last step: the stress of 4 and the affine moduli of the whole contact
+   law (kn and kt; contact_pass) of the state the steps reached, by a force evaluation
+   that leaves the tangential history as it is (list rebuilt first if 7 asked for it).
+   This is what the caller reads: the stress at the end of the increment, not one DEM
+   step before it (a lagging stress feeds energy into the MPM, docs/coupling.md).
 
 The kernels take their arguments as three named tuples: `RveState` (the arrays of the
 RVEs, state and scratch), `ContactLaw` (the constants of the contact law, damping and
@@ -95,9 +99,9 @@ class RveState(NamedTuple):
     mass: np.ndarray
     inertia: np.ndarray
     L: np.ndarray             # mean-field velocity gradient of the last step
-    stress: np.ndarray        # Love-Weber stress (last step of a call)
+    stress: np.ndarray        # Love-Weber stress of the state a call ends in
     stress_servo: np.ndarray  # the stress the servo last sampled
-    stiffness: np.ndarray     # affine stiffness C_ab
+    stiffness: np.ndarray     # affine moduli C_aabb (servo: the normal springs')
     step_count: np.ndarray    # steps taken
     nbr_j: np.ndarray         # neighbour list: index, image shift code, row lengths
     nbr_shift: np.ndarray
@@ -190,7 +194,8 @@ def _positions(h, s, x, force, torque):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
+def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=True,
+                 full_moduli=False):
     """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
     configuration; table is (27,3) scratch for the image shifts.
 
@@ -199,10 +204,20 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
     restitution coefficient (0: elastic). The dashpot is not clipped, so an isolated
     collision returns exactly e; the Coulomb cap uses max(f_n, 0).
 
-    Updates the tangential history by dt (dt = 0 only re-projects it), fills force and
-    torque (N) and, if `homogenise`, stress_out (3x3, Pa) and stiff_out (3x3 affine
-    stiffness C_ab, Pa); skipping them saves a third of the work per contact. Returns
-    (number of contacts, sum of normal contact forces [N]).
+    Updates the tangential history by dt if `commit` (else the history is only read: with
+    dt = 0 it is then the read-only force evaluation of the current state, projected onto
+    the current contact planes and capped, as the next step would see it), fills force
+    and torque (N) and, if `homogenise`, stress_out (3x3, Pa) and stiff_out (3x3, Pa);
+    skipping them saves a third of the work per contact. stiff_out holds the affine
+    moduli C_aabb of the contacts: with `full_moduli` those of the whole contact law,
+    (1/V) sum |d|^2 [kn n_a^2 n_b^2 + kt (delta_ab n_a^2 - n_a^2 n_b^2)], the diagonal
+    plus (1/V) sum |d| n_a^2 (|f_n| + |f_t|), a bound of the forces' turning with the
+    contact frame under an axial strain (|d| n_a^2 [f_n (1 - n_a^2) + |f_t| |n_a|]; the
+    change of d and of V cancel): a diagonal entry is then an upper bound of the modulus
+    of an increment taken in one step along that axis, which the MPM's wave speed reads
+    (tests/dem/test_end_of_increment.py). Without, the normal springs' alone,
+    (1/V) sum kn |d|^2 n_a^2 n_b^2 (the servo's C_ab).
+    Returns (number of contacts, sum of normal contact forces [N]).
     """
     young, kt_ratio, friction, gamma = law.young, law.kt_ratio, law.friction, law.gamma
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
@@ -232,6 +247,8 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
     tf = torque.reshape(3 * n)
     kcap = ft.shape[1]
     ftf = ft.reshape(3 * n * kcap)
+    kt_mod = kt_ratio if full_moduli else 0.0
+    geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces  # kt/kn in the moduli
     tab = table.reshape(81)
     for i in range(n):
         xi0 = x[i, 0]
@@ -255,9 +272,10 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
             rr = ri + rj
             dist2 = d0 * d0 + d1 * d1 + d2 * d2
             if dist2 >= rr * rr:
-                ftf[q] = 0.0
-                ftf[q + U1] = 0.0
-                ftf[q + U2] = 0.0
+                if commit:
+                    ftf[q] = 0.0
+                    ftf[q + U1] = 0.0
+                    ftf[q + U2] = 0.0
                 continue
             dist = math.sqrt(dist2)
             inv2 = 1.0 / (dist * rr)  # one division serves 1/dist and 1/rr
@@ -314,9 +332,10 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
                 f0 *= sc
                 f1 *= sc
                 f2 *= sc
-            ftf[q] = f0
-            ftf[q + U1] = f1
-            ftf[q + U2] = f2
+            if commit:
+                ftf[q] = f0
+                ftf[q + U1] = f1
+                ftf[q + U2] = f2
             # total force on i
             F0 = f0 - fn * n0
             F1 = f1 - fn * n1
@@ -353,12 +372,15 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise):
             q0 = dist * n0 * n0
             q1 = dist * n1 * n1
             q2 = dist * n2 * n2
-            c00 += kn * q0 * q0
-            c11 += kn * q1 * q1
-            c22 += kn * q2 * q2
-            c01 += kn * q0 * q1
-            c02 += kn * q0 * q2
-            c12 += kn * q1 * q2
+            # kt |d|^2 n_a^2 (1 - n_a^2) = kt q_a (dist - q_a); 0 unless full_moduli
+            kq = kt_mod * kn
+            fa = geo * (abs(fn) + math.sqrt(f0 * f0 + f1 * f1 + f2 * f2))
+            c00 += kn * q0 * q0 + kq * q0 * (dist - q0) + q0 * fa
+            c11 += kn * q1 * q1 + kq * q1 * (dist - q1) + q1 * fa
+            c22 += kn * q2 * q2 + kq * q2 * (dist - q2) + q2 * fa
+            c01 += (kn - kq) * q0 * q1
+            c02 += (kn - kq) * q0 * q2
+            c12 += (kn - kq) * q1 * q2
         force[i, 0] += fi0
         force[i, 1] += fi1
         force[i, 2] += fi2
@@ -506,7 +528,10 @@ def advance_rve(nsteps, law, st, ctl, out):
     ctl.dt [s]; see the module docstring.
 
     `out` (5,) receives: contacts, unbalanced-force ratio, kinetic energy [J], the row
-    length a list build asked for, steps done. Returns a status code (0 = ok).
+    length a list build asked for, steps done. Returns a status code (0 = ok). After the
+    steps (and with nsteps = -1 alone: no step) the stress, the moduli (unless a servo
+    runs), contact count, unbalanced-force ratio and kinetic energy are those of the
+    state reached (item 8).
     """
     dt, damping, skin = ctl.dt, law.damping, law.skin
     h, s, v, w, rot, L = st.h, st.s, st.v, st.w, st.rot, st.L
@@ -541,8 +566,6 @@ def advance_rve(nsteps, law, st, ctl, out):
         for b in range(3):
             if servo_mask[a, b] != 0:
                 servo_on = True
-    fres = 0.0
-    ekin = 0.0
     umax2 = 0.0
     for _step in range(nsteps):
         # 1. neighbour list, if the last step's check (7) asked for it
@@ -582,25 +605,17 @@ def advance_rve(nsteps, law, st, ctl, out):
             for b in range(3):
                 L[a, b] = l_mean[a, b] + hdot[a, 0] * hinv[0, b] + hdot[a, 1] * hinv[1, b] \
                     + hdot[a, 2] * hinv[2, b]
-        # 3-4. contacts, and the stress the caller needs (last step) or the servo reads.
-        # The servo samples its own copy every SERVO_EVERY steps of the RVE's life (a
-        # delay far shorter than the stress response, tens of steps) and keeps L in
-        # between; counting on the RVE's steps, not the call's, makes a run independent
-        # of how it is cut into calls
-        last = _step == nsteps - 1
+        # 3-4. contacts, and the stress the servo reads. The servo samples its own copy
+        # every SERVO_EVERY steps of the RVE's life (a delay far shorter than the stress
+        # response, tens of steps) and keeps L in between; counting on the RVE's steps,
+        # not the call's, makes a run independent of how it is cut into calls. The
+        # caller's stress is evaluated after the loop, at the end of the increment (8)
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
-        sig_out = stress_servo if sample else stress
-        # the stiffness is the servo's sample under servo control; otherwise that of the
-        # last step, so the caller (the MPM's wave speed) sees the current contacts. The
-        # last step homogenises anyway: the write costs nothing
-        report = sample or (last and not servo_on)
-        stiff_out = stiffness if report else stiff_scratch
-        if sample or last:  # two specialisations: the hot one keeps no stress sums live
-            ncontact, fsum = contact_pass(dt, law, st, table, sig_out, stiff_out, True)
+        if sample:  # two specialisations: the hot one keeps no stress sums live
+            ncontact, fsum = contact_pass(dt, law, st, table, stress_servo, stiffness, True)
         else:
-            ncontact, fsum = contact_pass(dt, law, st, table, sig_out, stiff_out, False)
-        if sample and last:
-            stress[:, :] = stress_servo
+            ncontact, fsum = contact_pass(dt, law, st, table, stress_servo, stiff_scratch,
+                                          False)
         step_count[0] += 1
         # 5. new cell, its inverse for the position update
         for a in range(3):
@@ -610,8 +625,6 @@ def advance_rve(nsteps, law, st, ctl, out):
         # 6. integration, in loops LLVM can vectorise over particles (few arrays each)
         umax2 = _translate(v, s, s_ref, force, inv_m, L, hinv, dt, damping)
         _rotate(w, rot, torque, inv_i, dt, damping)
-        if last:
-            fres, ekin = _residuals(force, v, w, mass, inertia)
         # 7. is the list still complete? |h ds| <= |h|_2 |ds| and
         # |h|_2 <= sqrt(|h|_1 |h|_inf) bound the fluctuating displacement cheaply
         n1 = max(abs(h[0, 0]) + abs(h[1, 0]) + abs(h[2, 0]),
@@ -632,7 +645,23 @@ def advance_rve(nsteps, law, st, ctl, out):
         if 2.0 * math.sqrt(umax2) + math.sqrt(e2sum) * cutoff >= skin:
             need_rebuild[0] = 1
         done += 1
-        if last:
+    # 8. end of the increment: the stress, moduli and contact count the caller reads are
+    # those of the state the loop leaves (after the last position update), by a
+    # read-only force evaluation; the list is completed first if 7 flagged it (the next
+    # step would build the same list from the same state)
+    if status == Status.OK and nsteps != 0:
+        if need_rebuild[0] != 0:
+            code, needed = build(h, s, radius, st.nbr_j, st.nbr_shift, st.nbr_count, st.ft,
+                                 s_ref, h_ref, st.link, st.wrapv, st.x, skin)
+            out[3] = needed
+            status = code
+            if code == Status.OK:
+                need_rebuild[0] = 0
+        if status == Status.OK:
+            stiff_out = stiff_scratch if servo_on else stiffness
+            ncontact, fsum = contact_pass(0.0, law, st, table, stress, stiff_out, True,
+                                          False, not servo_on)
+            fres, ekin = _residuals(force, v, w, mass, inertia)
             out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
             out[2] = ekin
     out[0] = ncontact

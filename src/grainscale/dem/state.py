@@ -37,11 +37,14 @@ class RVEBatch:
     mass: np.ndarray         # (R,N) [kg]
     inertia: np.ndarray      # (R,N) moment of inertia 2/5 m r^2 [kg m^2]
     L: np.ndarray            # (R,3,3) mean-field velocity gradient of the last step [1/s]
-    stress: np.ndarray       # (R,3,3) Love-Weber Cauchy stress, tension positive [Pa]
+    stress: np.ndarray       # (R,3,3) Love-Weber Cauchy stress, tension positive [Pa], of
+    #                          the state the last call ended in
     stress_servo: np.ndarray  # (R,3,3) the stress the servo last sampled [Pa]
     step_count: np.ndarray   # (R,) int64 DEM steps taken (the servo samples on it)
-    stiffness: np.ndarray    # (R,3,3) affine stiffness C_ab: the servo's last sample, or
-    #                          without servo that of the last step (MPM wave speed) [Pa]
+    stiffness: np.ndarray    # (R,3,3) affine moduli C_aabb [Pa]: under a servo its last
+    #                          sample (normal springs only); else those of the state a call
+    #                          ends in, kn, kt and the forces' turning (MPM wave speed;
+    #                          kernel.contact_pass)
     h0: np.ndarray           # (R,3,3) reference cell for eps_v = ln(V/V0)
     nbr_j: np.ndarray        # (R,N,K) int32 neighbour index
     nbr_shift: np.ndarray    # (R,N,K) uint8 image shift code
