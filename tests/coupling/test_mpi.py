@@ -90,6 +90,66 @@ def interrupted_history(case: Path, out: Path, first: int, steps: int, then: int
     return (out / "history.csv").read_text()
 
 
+COLUMN = Path(__file__).resolve().parents[2] / "examples" / "column_collapse" / "quick.toml"
+
+
+def small_column(tmp: Path) -> Path:
+    """The quick column collapse with every feature it uses, shrunk to run in seconds: a
+    geostatic stage with nodal damping and a gate released at t = 0, dynamic RVEs (real
+    time, restitution 0.9, kinetic stress) from a library of 2, AFLIP, a Coulomb floor,
+    a one-sided back wall, roller side walls, and every cell doubled (retiled) at its
+    first update; 96 points, RVEs of 80 spheres, ~140 steps."""
+    case = tomllib.loads(COLUMN.read_text())
+    case["grid"]["cells"] = [8, 2, 4]
+    case["time"].update(start=-0.0015, end=0.003)
+    case["bodies"][0]["hi"] = [0.04, 0.01, 0.03]
+    case["boundaries"][-1]["box"] = {"lo": [0.04, 0.0, 0.0], "hi": [0.04, 0.01, 0.04]}
+    case["boundaries"][-2]["box"]["hi"] = [0.08, 0.01, 0.04]
+    case["output"].update(interval=1e-4, frame_interval=1e-3)
+    case["output"]["column"].update(length=0.04, height=0.03)
+    case["materials"]["sand"].update(retile_width=20.0, retile_max_factor=2)
+    case["rve"].update(particles=80, radius_max=2.4e-3)
+    case["rve"]["preparation"].update(porosity=0.41, porosity_tolerance=0.01)
+    case["solver"]["rebalance_every"] = 7
+    path = tmp / "column.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
+def test_column_features_are_rank_and_thread_independent(tmp_path):
+    """The reduced column (small_column) gives one history.csv, to the byte, on 1 rank
+    with 1 and 2 threads, on 2 ranks, and on 3 ranks stopped and resumed on 2 (with
+    measured-cost rebalancing every 7 steps moving points and RVEs between ranks).
+    This one case replaces the unit element's separate rank, thread and rebalancing jobs.
+    The split-dependent P2G scale that parted the quick column's 1- and 2-rank runs at
+    step 19 struck where a bound crossed a power of two, rarely in 140 steps, so it has a
+    test of its own (test_transfer.py::test_p2g_does_not_depend_on_how_the_points_are_split)."""
+    case = small_column(tmp_path)
+    ref = tmp_path / "serial"
+    assert main(["run", str(case), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
+    history = (ref / "history.csv").read_text()
+    rows = [r for r in history.splitlines() if r[:1].isdigit()]
+    assert len(rows) > 40
+    last = meshio.read(sorted((ref / "frames").glob("frame_*.vtu"))[-1]).point_data
+    assert set(np.unique(last["rve_particles"])) == {160.0}  # every cell doubled
+
+    def fresh(name):  # the serial run's packings, so no run regenerates them
+        out = tmp_path / name
+        shutil.copytree(ref / "packings", out / "packings")
+        return out
+
+    out = fresh("threads2")
+    assert main(["run", str(case), "--out", str(out), "--quiet", "--threads", "2"]) == 0
+    assert (out / "history.csv").read_text() == history, "2 threads differ"
+    out = fresh("ranks2")
+    r = mpirun(2, ["run", str(case), "--out", str(out), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 ranks differ"
+    out = fresh("ranks3")
+    assert interrupted_history(case, out, first=3, steps=60, then=2) == history
+    assert json.loads((out / "cost.json").read_text())["rebalances"] >= 2
+
+
 @pytest.fixture(scope="module")
 def rve_case(tmp_path_factory):
     """The small unit element with a library of 4 packings, so that RVEs differ (the
@@ -113,21 +173,6 @@ def serial(serial_out):
     return (serial_out / "history.csv").read_text()
 
 
-def test_ranks_give_identical_multiscale_history(rve_case, serial, tmp_path):
-    for n in (2, 3):
-        out = tmp_path / f"n{n}"
-        r = mpirun(n, ["run", str(rve_case), "--out", str(out), "--quiet"])
-        assert r.returncode == 0, r.stderr
-        assert (out / "history.csv").read_text() == serial, f"{n} ranks differ"
-    assert len(serial.splitlines()) > 20  # header + a row per step (18 steps)
-
-
-def test_threads_give_identical_multiscale_history(rve_case, serial, tmp_path):
-    out = tmp_path / "t2"
-    assert main(["run", str(rve_case), "--out", str(out), "--quiet", "--threads", "2"]) == 0
-    assert (out / "history.csv").read_text() == serial
-
-
 def test_ranks_give_identical_history_with_tractions(tmp_path):
     """Phenomenological material, MUSL, gravity and a traction shared by the ranks."""
     case = tmp_path / "mc.toml"
@@ -138,20 +183,6 @@ def test_ranks_give_identical_history_with_tractions(tmp_path):
         r = mpirun(n, ["run", str(case), "--out", str(tmp_path / f"n{n}"), "--quiet"])
         assert r.returncode == 0, r.stderr
         assert (tmp_path / f"n{n}" / "history.csv").read_text() == ref
-
-
-def test_rebalancing_moves_points_without_changing_results(rve_case, serial, tmp_path):
-    """Measured-cost rebalancing every 3 steps (points and RVEs change ranks), with a
-    checkpoint and a resume on another rank count in between: still the serial history."""
-    case = tomllib.loads(rve_case.read_text())
-    case["solver"]["rebalance_every"] = 3
-    path = tmp_path / "rebalanced.toml"
-    path.write_text(tomli_w.dumps(case))
-    out = tmp_path / "out"
-    assert interrupted_history(path, out, first=3, steps=10, then=2) == serial
-    cost = json.loads((out / "cost.json").read_text())
-    assert cost["rebalances"] >= 2
-    assert cost["imbalance_after_last"] <= cost["imbalance_before_last"]
 
 
 def test_restart_under_mpi_on_any_rank_count(rve_case, serial, tmp_path):

@@ -170,3 +170,74 @@ def test_non_finite_values_stop_the_step(field):
     with pytest.raises(SimulationError, match="non-finite"):
         for _ in range(2):  # a NaN velocity shows in the next step's G2P
             step(s, 1e-4)
+
+
+class _Lockstep:
+    """A stand-in communicator for one of two ranks: its reductions combine this rank's
+    values with the partner's, as recorded from the partner's own call (`maxes`: the
+    vectors it passed to max, `ints`: the integer arrays it passed to sum_int, in call
+    order; None: not combined). It records its own in .maxes and .ints."""
+
+    size = 2
+    rank = 0
+
+    def __init__(self, maxes=None, ints=None):
+        self.partner_maxes, self.partner_ints = maxes, ints
+        self.maxes, self.ints = [], []
+
+    def max(self, values):
+        a = np.array(values, dtype=np.float64)
+        self.maxes.append(a.copy())
+        if self.partner_maxes is not None:
+            a = np.maximum(a, self.partner_maxes[len(self.maxes) - 1])
+        return a
+
+    def sum_int(self, a):
+        self.ints.append(a.copy())
+        if self.partner_ints is not None:
+            a += self.partner_ints[len(self.ints) - 1]
+
+
+def test_p2g_does_not_depend_on_how_the_points_are_split():
+    """Mass and momentum from points split over two ranks equal a single process's to the
+    bit. The fixed-point scale of the momentum bounds |v_p + C_p (x_I - x_p)| by
+    |v|max + 2 h max_a sum_b |C_ab|; rank A holds the fastest point, rank B the largest
+    C, so the maximum over ranks of each rank's own bound (what was reduced before) lies
+    a power of two below the global bound, and every node's momentum rounded on half
+    the scale (the quick column's 1- and 2-rank runs parted at step 19)."""
+    from grainscale.mpm.transfer import Transfer, fixed_point_scale
+
+    s = _random_state(LINEAR)
+    pts = s.points
+    rng = np.random.default_rng(5)
+    pts.v[:] = rng.uniform(-0.1, 0.1, pts.v.shape)
+    pts.C = rng.uniform(-0.1, 0.1, (pts.n, 3, 3))
+    half = np.arange(pts.n) < pts.n // 2
+    reach = 2.0 * float(s.grid.cell_size.max())
+    pts.v[0] = [1.0, 0.0, 0.0]  # rank A's
+    pts.C[-1] = 0.0
+    pts.C[-1, 0, 0] = 1.0 / reach  # rank B's: its own bound 0.1 + 1, A's 1 + 0.3 reach/h
+    global_bound = 1.0 + reach * np.abs(pts.C).sum(axis=2).max()
+    split_bound = max(np.abs(pts.v[half]).max() + reach * np.abs(pts.C[half]).sum(axis=2).max(),
+                      np.abs(pts.v[~half]).max() + reach * np.abs(pts.C[~half]).sum(axis=2).max())
+    m_max = pts.m.max()
+    # the case does what it claims: the two bounds give different scales
+    assert fixed_point_scale(pts.n * m_max * split_bound) != fixed_point_scale(
+        pts.n * m_max * global_bound)
+    shape_functions(s)
+    n_nodes = s.grid.n_nodes
+
+    def transfer(rows, comm):
+        t = Transfer(n_nodes, int(rows.sum()), 1, comm, n_global=pts.n)
+        return t.mass_momentum(pts.m[rows], pts.v[rows], pts.C[rows], pts.x[rows], s.grid,
+                               s.base[rows], s.w[rows], s.ns)
+
+    mass, mom, _ = transfer(np.ones(pts.n, bool), None)
+    a0 = _Lockstep()  # A's own maxima
+    transfer(half, a0)
+    b = _Lockstep(maxes=a0.maxes)  # B's integers, on the box and scale of both ranks
+    transfer(~half, b)
+    a = _Lockstep(maxes=b.maxes, ints=b.ints)  # A, reduced with B
+    mass_a, mom_a, _ = transfer(half, a)
+    assert np.array_equal(mass_a, mass)
+    assert np.array_equal(mom_a, mom)
