@@ -172,7 +172,8 @@ class RVEMaterial:
         batch); its skew part (the net contact torque over V, non-zero while grain spins
         accelerate) belongs to no Cauchy stress, and the MPM's nodal force
         f_a = -V sigma_ab dS/dx_b would take it transposed, so the MPM gets the symmetric
-        part. The batch's `stiffness` is then that of the current contacts (wave_speed).
+        part. The stress and the batch's `stiffness` are those of the state the increment
+        reached (kernel.py item 8; wave_speed).
         """
         if not self.groups:
             return
@@ -239,13 +240,14 @@ class RVEMaterial:
         return self._per_point(lambda b: _sym(b.stress))
 
     def wave_speed(self) -> float:
-        """Largest P-wave speed of the RVEs, sqrt(max_k C_kk / rho) of each [m/s].
+        """Largest P-wave speed of the RVEs, sqrt(max_k M_k / rho) of each [m/s].
 
-        C_kk = (1/V) sum_c kn |d|^2 n_k^4 [Pa] is the affine stiffness of an RVE's
-        contacts at the last DEM step of its last update (the kernel writes it there when
-        no servo runs), an upper bound of its constrained modulus, over its own bulk
-        density rho [kg/m^3]: conservative, so the CFL step is safe, and a maximum over
-        RVEs, so it does not depend on how RVEs are split over ranks.
+        M_k [Pa] (the diagonal of the batch's `stiffness`) bounds the modulus of an
+        increment taken in one DEM step along axis k: the affine constrained modulus of
+        the contacts, kn and kt, plus their forces' turning (kernel.contact_pass),
+        evaluated at the end of the RVE's last update (docs/coupling.md). Over the RVE's
+        own bulk density rho [kg/m^3]; a maximum over RVEs, so it does not depend on how
+        RVEs are split over ranks.
         """
         speed = 0.0
         for b in self.groups:
