@@ -281,8 +281,8 @@ def test_a_retile_width_below_the_search_limit_is_refused(small_rve):
 
 
 def _max_affine_stiffness(batch, cp):
-    """max_k C_kk of each RVE [Pa], C recomputed by engine.refresh (on a copy) from the
-    contacts at the batch's current configuration."""
+    """max_k M_k of each RVE [Pa], the moduli evaluated by engine.refresh (on a copy) at
+    the batch's current configuration."""
     from grainscale.dem import engine
 
     b = engine.refresh(batch.copy(), cp)
@@ -294,9 +294,9 @@ def test_wave_speed_follows_the_contact_network(small_rve, strain):
     """MPM increments (no servo) change the contact network: 1 % isotropic compression
     stiffens it (to 448 contacts, c +4.3 %), 0.2 % extension opens a third of the
     contacts (to 256, c -19 %); the direction is the check here, the exact value the
-    replay below. After every update the CFL wave speed is that of the contacts
-    of the update's last DEM step: replaying the increment's first n - 1 DEM steps on
-    a copy and recomputing C there gives the same value. It survives a restore."""
+    replay below. After every update the CFL wave speed is that of the state the
+    update reached: replaying the increment's n DEM steps on a copy and evaluating the
+    moduli there (engine.refresh) gives the same value. It survives a restore."""
     from grainscale.dem import engine
 
     params, packing = small_rve
@@ -315,7 +315,7 @@ def test_wave_speed_follows_the_contact_network(small_rve, strain):
         mat.update(dH, dt, stress)
         n = mat.substeps
         replay = engine.increment_control(before, dH, n, dt / n)
-        engine.advance(before, n - 1, dt / n, mat.cp, replay)
+        engine.advance(before, n, dt / n, mat.cp, replay)
         expected = speed(_max_affine_stiffness(before, mat.cp)[0])
         assert mat.wave_speed() == pytest.approx(expected, rel=1e-12)
     c1 = mat.wave_speed()

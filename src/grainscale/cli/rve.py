@@ -68,7 +68,7 @@ def dispatch(args: argparse.Namespace) -> int:
             write_packing(args.out, batch.h[0], batch.s[0] @ batch.h[0].T, batch.radius[0])
         if args.vtk is not None:
             write_rve_vtk(args.vtk, batch, case.rve.young_modulus,
-                          gamma=contact_params(case.rve).gamma)
+                          gamma=contact_params(case.rve).gamma, friction=case.rve.friction)
         row = element_tests.state_row(batch)
         print(f"wrote {args.out}: porosity {row['porosity']:.4f}, p = {row['p']:.5g} Pa, "
               f"coordination {row['coordination']:.2f} ({time.perf_counter() - t0:.1f} s)")

@@ -11,9 +11,9 @@ frame_NNNNN.vtu), listed in `probe_NAME_spheres.pvd`, `probe_NAME_contacts.pvd` 
 `probe_NAME_cell.pvd`.
 
 What is written is the RVE at the end of the step, with its contact forces and
-Love-Weber stress evaluated in that configuration (engine.refresh on a copy: the run's
-RVE is not touched). The stress in frame_NNNNN.vtu is the one the MPM used, from the
-last DEM step's contact pass, one DEM step earlier.
+Love-Weber stress evaluated in that configuration (engine.refresh on a copy, which
+changes nothing: the RVE's update ends with the same evaluation). The stress in
+frame_NNNNN.vtu, the one the MPM used, is its symmetric part.
 
 Under MPI the rank that owns the point now (ownership changes when rebalancing) sends
 a copy of its RVE to rank 0, which writes every file, as it does the frames. A resumed
@@ -85,8 +85,8 @@ def describe(p: Probe) -> str:
 
 
 def _local_rve(s: MPMState, point: int):
-    """(RVE copy refreshed in its configuration, young, gamma) of global point `point`
-    if this rank owns it, else None."""
+    """(RVE copy refreshed in its configuration, young, gamma, friction) of global point
+    `point` if this rank owns it, else None."""
     pos = int(np.searchsorted(s.point_ids, point))
     if pos == len(s.point_ids) or s.point_ids[pos] != point:
         return None
@@ -95,7 +95,7 @@ def _local_rve(s: MPMState, point: int):
     row = pos if ids is None else int(np.searchsorted(ids, pos))
     batch = mat.rve(row)
     engine.refresh(batch, mat.cp)
-    return batch, mat.cp.young, mat.cp.gamma
+    return batch, mat.cp.young, mat.cp.gamma, mat.cp.friction
 
 
 class ProbeWriter:
@@ -144,10 +144,10 @@ class ProbeWriter:
         parts = self.comm.gather(mine)
         if parts is None:
             return
-        for i, (batch, young, gamma) in sorted((x for part in parts for x in part),
-                                               key=lambda x: x[0]):
+        for i, (batch, young, gamma, friction) in sorted(
+                (x for part in parts for x in part), key=lambda x: x[0]):
             name = self.probes[i].name
             paths = write_rve_vtk(self.out / "frames" / f"probe_{name}_{frame:05d}", batch,
-                                  young, 0, gamma)
+                                  young, 0, gamma, friction)
             for kind, path in zip(KINDS, paths, strict=True):
                 self.series[name][kind].add(s.time, path)

@@ -13,12 +13,12 @@ the Love-Weber stress of the contacts is (1/V) sum d (x) force_vector.
 data stress (the batch's Love-Weber stress, 9 components row-major, tension positive
 [Pa]), p, q [Pa] (compression positive) and porosity.
 
-The contact forces are those of the stored configuration: normal force kn overlap minus
-the dashpot 2 gamma sqrt(m* kn) v_n when `gamma` (engine.ContactParams.gamma) is given,
-and the stored tangential force. They match `batch.stress` when the batch was refreshed
-(engine.refresh) in that configuration; after engine.advance the stress is that of the
-last step's contact pass, one DEM step earlier. Each file is written to a temporary
-name and renamed, so a crash never leaves half a file.
+The contact forces are those of the stored configuration, as the kernel evaluates them
+at the end of a call (dem/kernel.py, item 8): normal force kn overlap minus the dashpot
+2 gamma sqrt(m* kn) v_n when `gamma` (engine.ContactParams.gamma) is given, and the
+stored tangential force projected onto the contact plane and capped at friction
+max(f_n, 0). They match `batch.stress` after engine.advance or engine.refresh. Each file
+is written to a temporary name and renamed, so a crash never leaves half a file.
 """
 
 from __future__ import annotations
@@ -34,12 +34,14 @@ from grainscale.dem.state import RVEBatch
 from grainscale.stress import p_q
 
 
-def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0):
+def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0,
+                 friction: float = np.inf):
     """(i, j, branch d [m], normal force [N], tangential force vector [N]) of contacts.
 
     The normal force is kn delta, minus the normal dashpot 2 gamma sqrt(m* kn) v_n
-    (v_n > 0 separating, the mean-field strain rate of batch.L included) when gamma > 0,
-    as the kernel computes it (dem/kernel.py, contact_pass)."""
+    (v_n > 0 separating, the mean-field strain rate of batch.L included) when gamma > 0;
+    the tangential force the stored history on the current contact plane, capped at
+    friction max(f_n, 0): as the kernel evaluates them (dem/kernel.py, contact_pass)."""
     h = batch.h[r]
     x = batch.s[r] @ h.T
     table = np.empty((27, 3))
@@ -61,7 +63,14 @@ def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0):
         mi, mj = batch.mass[r][rows_i], batch.mass[r][j]
         fn = fn - 2.0 * gamma * np.sqrt(mi * mj / (mi + mj) * kn) * vn
     ft = batch.ft[r][rows_i, rows_k]
-    return rows_i[touch], j[touch], d[touch], fn[touch], ft[touch]
+    n = d[touch] / dist[touch, None]
+    fn, ft = fn[touch], ft[touch]
+    ft = ft - np.einsum("ca,ca->c", ft, n)[:, None] * n
+    cap = friction * np.maximum(fn, 0.0)
+    norm = np.linalg.norm(ft, axis=1)
+    over = norm > cap
+    ft[over] *= (cap[over] / norm[over])[:, None]
+    return rows_i[touch], j[touch], d[touch], fn, ft
 
 
 def _write(mesh: meshio.Mesh, path: Path) -> None:
@@ -71,9 +80,10 @@ def _write(mesh: meshio.Mesh, path: Path) -> None:
 
 
 def write_rve_vtk(stem: str | Path, batch: RVEBatch, young: float, r: int = 0,
-                  gamma: float = 0.0) -> list[Path]:
-    """Write the three snapshot files of RVE r; returns their paths. young [Pa] and
-    gamma (the normal dashpot's damping ratio, 0: none) as in engine.ContactParams."""
+                  gamma: float = 0.0, friction: float = np.inf) -> list[Path]:
+    """Write the three snapshot files of RVE r; returns their paths. young [Pa], gamma
+    (the normal dashpot's damping ratio, 0: none) and friction as in
+    engine.ContactParams."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     h = batch.h[r]
@@ -84,7 +94,7 @@ def write_rve_vtk(stem: str | Path, batch: RVEBatch, young: float, r: int = 0,
         x, [("vertex", np.arange(n).reshape(-1, 1))],
         point_data={"radius": batch.radius[r], "mass": batch.mass[r], "velocity": batch.v[r],
                     "angular_velocity": batch.w[r], "rotation": batch.rot[r]})
-    i, j, d, fn, ft = contact_list(batch, young, r, gamma)
+    i, j, d, fn, ft = contact_list(batch, young, r, gamma, friction)
     start = x[i]
     pts = np.concatenate([start, start + d]) if len(i) else np.zeros((0, 3))
     lines = np.stack([np.arange(len(i)), np.arange(len(i)) + len(i)], axis=1)
