@@ -11,7 +11,8 @@ Per step of one RVE (dt fixed), in the order the code runs:
    component is replaced by
    L_kk = g (sigma*_kk - sigma_kk) / (C_kk dt) on the diagonal and, for a shear pair,
    L_ab = L_ba = g (sigma*_ab - sym sigma_ab) / (2 C_ab dt) (clipped to +-max_rate),
-   where C_ab = (1/V) sum kn |d|^2 n_a^2 n_b^2 is the affine stiffness of the last step;
+   where C_ab = (1/V) sum kn |d|^2 n_a^2 n_b^2 is the normal springs' affine stiffness
+   of the servo's last sample (4);
    the mean-field velocity gradient is L = L_mean + (hdot_fixed + L_c h) h^-1, where
    L_mean = log(E)/dt is the exact rate of the step map (skew for a rotation).
 3. contacts over the half list, in the current cell h (seed Eq. 7-10): kn = E r*,
