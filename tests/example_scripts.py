@@ -1,4 +1,5 @@
-"""Load a script under examples/ as a module, so that tests can call its functions."""
+"""Load a script under examples/ or studies/ as a module, so that tests can call its
+functions."""
 
 import importlib.util
 import sys
@@ -6,12 +7,14 @@ from pathlib import Path
 from types import ModuleType
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+STUDIES = EXAMPLES.parent / "studies"
 
 
-def load_example(relpath: str) -> ModuleType:
-    """examples/<relpath> (e.g. "intrusion/analyse.py") imported under its stem, its
-    folder on sys.path as when it runs as a script (so that it finds its siblings)."""
-    path = EXAMPLES / relpath
+def load_example(relpath: str, root: Path = EXAMPLES) -> ModuleType:
+    """examples/<relpath> (e.g. "intrusion/analyse.py"; or root/<relpath>) imported under
+    its stem, its folder on sys.path as when it runs as a script (so that it finds its
+    siblings)."""
+    path = root / relpath
     if str(path.parent) not in sys.path:
         sys.path.insert(0, str(path.parent))
     spec = importlib.util.spec_from_file_location(path.stem, path)

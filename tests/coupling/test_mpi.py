@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 import tomli_w
 
+from example_scripts import STUDIES, load_example
 from grainscale.cli import main
 from grainscale.dem.retile import widths
 from grainscale.io.rve_h5 import read_rve_state
@@ -132,6 +133,10 @@ def test_column_features_are_rank_and_thread_independent(tmp_path):
     assert len(rows) > 40
     last = meshio.read(sorted((ref / "frames").glob("frame_*.vtu"))[-1]).point_data
     assert set(np.unique(last["rve_particles"])) == {160.0}  # every cell doubled
+    # studies/column_spread.py reads such a run: the last frame's points, 4 cm of column
+    spread = load_example("column_spread.py", STUDIES).measures(ref, 0.04)
+    assert spread["mass95"] <= spread["mass99"] <= spread["front"] + 0.5 / 4  # 1/4 cell
+    assert spread["steps"] == int(rows[-1].split(",")[0])
 
     def fresh(name):  # the serial run's packings, so no run regenerates them
         out = tmp_path / name

@@ -1,0 +1,55 @@
+"""Where finished column runs ended: the spread of a column collapse over realisations.
+
+    python studies/column_spread.py RUN [RUN ...] [--length 0.1]
+
+For each finished run folder (history.csv with runout_ratio and height_ratio, frames.pvd)
+prints one JSON line at its last row: the front (runout ratio of the outermost point),
+the runout ratios behind which 99 % and 95 % of the points of the last frame lie (equal
+point masses: every column body is one uniform box), H_f/H_i, the kinetic energy there
+over its peak, and the MPM steps; then one line with the range of each measure over the
+runs. docs/validation.md §2.3 ("Round-off") compares realisations that differ only at
+round-off with it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from grainscale.analysis import read_columns
+from grainscale.io.vtk import PVDSeries, read_points_vtu
+
+
+def measures(run: Path, length: float) -> dict:
+    """The run's measures at its last history row and last frame (see the module)."""
+    h = read_columns(run / "history.csv")
+    frames = PVDSeries.load(run / "frames.pvd").entries
+    x = read_points_vtu(run / frames[-1][1])[0][:, 0]
+    q99, q95 = np.quantile(x, [0.99, 0.95])
+    ke = h["kinetic_energy"]
+    return {"run": str(run), "t_over_tc": round(float(h["t_over_tc"][-1]), 3),
+            "front": round(float(h["runout_ratio"][-1]), 3),
+            "mass99": round(float((q99 - length) / length), 3),
+            "mass95": round(float((q95 - length) / length), 3),
+            "height_ratio": round(float(h["height_ratio"][-1]), 3),
+            "kinetic_end_over_peak": float(ke[-1] / ke.max()) if ke.max() > 0 else 0.0,
+            "steps": int(h["step"][-1])}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", type=Path, nargs="+")
+    ap.add_argument("--length", type=float, default=0.1, help="L_i, the column's length [m]")
+    args = ap.parse_args()
+    rows = [measures(run, args.length) for run in args.runs]
+    for row in rows:
+        print(json.dumps(row))
+    keys = ("front", "mass99", "mass95", "height_ratio")
+    print(json.dumps({k: [min(r[k] for r in rows), max(r[k] for r in rows)] for k in keys}))
+
+
+if __name__ == "__main__":
+    main()
