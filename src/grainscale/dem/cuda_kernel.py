@@ -596,6 +596,35 @@ def _cell_control(r, dt, h, L, stress_servo, stiffness, e_step, l_mean, hdot_fix
 
 
 @cuda.jit(device=True)
+def _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
+           wrapv, x, old_j, old_code, ent, rev, revc, skin, cutoff, need_rebuild, out, red,
+           res, rev_ok):
+    """The lists a contact pass of RVE r needs (collective): the neighbour list rebuilt if
+    the last check flagged it, the reverse list made if stale. Returns (status code,
+    rev_ok); on OVERFLOW out[r, 3] holds the row capacity to ask for."""
+    if need_rebuild[r] != 0:
+        code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft,
+                              s_ref, h_ref, wrapv, x, old_j, old_code, ent, skin, cutoff,
+                              red, res)
+        if tid == 0:
+            out[r, 3] = needed
+        if code != OK:
+            return code, rev_ok
+        rev_ok = False
+        cuda.syncthreads()  # need_rebuild read by all before thread 0 clears it
+        if tid == 0:
+            need_rebuild[r] = 0
+    if not rev_ok:
+        rneed = _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res)
+        if rneed > rev.shape[2]:  # rev holds 2 K: ask for K >= rneed / 2
+            if tid == 0:
+                out[r, 3] = _max(out[r, 3], float((rneed + 1) // 2))
+            return OVERFLOW, rev_ok
+        rev_ok = True
+    return OK, rev_ok
+
+
+@cuda.jit(device=True)
 def _end_frame(r, h, L, Ls, tab):
     """Thread 0, before the end-of-increment evaluation: Ls <- L[r] (the last step's
     velocity gradient) and the image table of the current cell."""
@@ -729,26 +758,12 @@ def _make_kernel(nthr: int):
             rev_ok = False
             for _step in range(nst):
                 # 1. neighbour list, if the last step's check asked for it
-                if need_rebuild[r] != 0:
-                    code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
-                                          nbr_count, ft, s_ref, h_ref, wrapv, x, old_j,
-                                          old_code, ent, skin, cutoff, red, res)
-                    if tid == 0:
-                        out[r, 3] = needed
-                    if code != OK:
-                        break
-                    rev_ok = False
-                    cuda.syncthreads()  # need_rebuild read by all before thread 0 clears it
-                    if tid == 0:
-                        need_rebuild[r] = 0
-                if not rev_ok:
-                    rneed = _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res)
-                    if rneed > rev.shape[2]:  # rev holds 2 K: ask for K >= rneed / 2
-                        if tid == 0:
-                            out[r, 3] = _max(out[r, 3], float((rneed + 1) // 2))
-                        code = OVERFLOW
-                        break
-                    rev_ok = True
+                code, rev_ok = _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
+                                      nbr_count, ft, s_ref, h_ref, wrapv, x, old_j, old_code,
+                                      ent, rev, revc, skin, cutoff, need_rebuild, out, red,
+                                      res, rev_ok)
+                if code != OK:
+                    break
                 sample = servo_on and step_count[r] % SERVO_EVERY == 0
                 # 2. cell control (thread 0), shared with the block
                 if tid == 0:
@@ -803,22 +818,10 @@ def _make_kernel(nthr: int):
             # 8. end of the increment (kernel.advance_rve): the caller's stress and moduli
             # of the state reached, the history left as it is
             if code == OK and nst != 0:
-                if need_rebuild[r] != 0:
-                    code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
-                                          nbr_count, ft, s_ref, h_ref, wrapv, x, old_j,
-                                          old_code, ent, skin, cutoff, red, res)
-                    if tid == 0:
-                        out[r, 3] = needed
-                    rev_ok = False
-                    cuda.syncthreads()  # need_rebuild read by all before thread 0 clears it
-                    if tid == 0 and code == OK:
-                        need_rebuild[r] = 0
-                if code == OK and not rev_ok:
-                    rneed = _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res)
-                    if rneed > rev.shape[2]:
-                        if tid == 0:
-                            out[r, 3] = _max(out[r, 3], float((rneed + 1) // 2))
-                        code = OVERFLOW
+                code, rev_ok = _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
+                                      nbr_count, ft, s_ref, h_ref, wrapv, x, old_j, old_code,
+                                      ent, rev, revc, skin, cutoff, need_rebuild, out, red,
+                                      res, rev_ok)
                 if code == OK:
                     if tid == 0:  # the last step's L, and the image table of the new cell
                         _end_frame(r, h, L, Ls, tab)
