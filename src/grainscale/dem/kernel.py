@@ -248,8 +248,8 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
     tf = torque.reshape(3 * n)
     kcap = ft.shape[1]
     ftf = ft.reshape(3 * n * kcap)
-    kt_mod = kt_ratio if full_moduli else 0.0
-    geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces  # kt/kn in the moduli
+    kt_mod = kt_ratio if full_moduli else 0.0  # kt/kn in the moduli
+    geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
     tab = table.reshape(81)
     for i in range(n):
         xi0 = x[i, 0]
