@@ -1,21 +1,22 @@
 """What an RVE hands to the MPM after an increment: the stress of the state it reached,
 and moduli that bound its stiffness (kernel.py, item 8).
 
-The stress is checked against an independent plain-numpy evaluation of the returned
-state (all pairs by brute force over the 27 images, the contact law written from
-kernel.py's docstring), so a stress one DEM step old, or a list that missed a contact,
-shows. Before the end-of-increment evaluation the returned stress was that of the last
-step's start: off by the response of that step, ~1e-2 of p here, against the 1e-10 below.
+The stress is checked against the independent plain-numpy reference of
+test_reference.py (all pairs by brute force over the 27 images, the contact law written
+from kernel.py's docstring) evaluating the returned state, so a stress one DEM step
+old, or a list that missed a contact, shows. Before the end-of-increment evaluation the
+returned stress was that of the last step's start: off by the response of that step,
+~1e-2 of p here, against the 1e-10 below.
 """
 
 from __future__ import annotations
 
-import itertools
 from pathlib import Path
 
 import numpy as np
 import pytest
-from dem_helpers import SMALL_PARAMS
+from dem_helpers import SMALL_PARAMS, brute_pairs
+from test_reference import reference_history, reference_step
 
 from grainscale.dem import engine
 from grainscale.dem.generate import contact_params
@@ -24,7 +25,6 @@ from grainscale.dem.state import from_packing
 from grainscale.io.packing import read_packing
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "triaxial_150"
-IMAGES = np.array(list(itertools.product((-1, 0, 1), repeat=3)), float)
 
 
 @pytest.fixture(scope="module")
@@ -39,57 +39,15 @@ def packing():
     return b, cp
 
 
-def touching_pairs(b):
-    """(i, j, d) of every touching pair by brute force: d = x_j - x_i over the nearest of
-    the 27 images (cells here are wider than 4 r_max: at most one image touches)."""
-    h, s, r = b.h[0], b.s[0], b.radius[0]
-    iu, ju = np.triu_indices(len(r), 1)
-    dc = ((s[ju] - s[iu])[:, None, :] + IMAGES[None]) @ h.T
-    dist = np.linalg.norm(dc, axis=2)
-    p, k = np.nonzero(dist < (r[iu] + r[ju])[:, None])
-    return iu[p], ju[p], dc[p, k]
-
-
-def numpy_stress(b, cp):
-    """Love-Weber stress minus the kinetic stress of RVE 0's state [Pa], tension positive:
-    f_n = kn (r_i + r_j - |d|) - 2 gamma sqrt(m* kn) v_n, the stored tangential force
-    projected onto the contact plane and capped at mu max(f_n, 0), relative velocity from
-    v, w and D = sym L with lever arms to the middle of the overlap."""
-    h, s, v, w = b.h[0], b.s[0], b.v[0], b.w[0]
-    r, m, L = b.radius[0], b.mass[0], b.L[0]
-    D = 0.5 * (L + L.T)
-    # the history of each listed pair, keyed by the pair and its image shift in Cartesian
-    # form (the list's own shift codes are only used to find the entry)
-    hist = {}
-    for i in range(b.n_particles):
-        for k in range(b.nbr_count[0, i]):
-            j = int(b.nbr_j[0, i, k])
-            shift = decode_shifts(np.array([b.nbr_shift[0, i, k]]))[0]
-            d = h @ (s[j] - s[i] + shift)
-            hist[(i, j, tuple(np.round(d, 9)))] = b.ft[0, i, k]
-    i_all, j_all, d_all = touching_pairs(b)
-    sigma = np.zeros((3, 3))
-    for i, j, d in zip(i_all, j_all, d_all, strict=True):
-        key = (int(i), int(j), tuple(np.round(d, 9)))
-        if key not in hist:  # listed the other way round
-            key = (int(j), int(i), tuple(np.round(-d, 9)))
-            i, j, d = j, i, -d
-        ft = hist[key]
-        dist = np.linalg.norm(d)
-        n = d / dist
-        rr = r[i] + r[j]
-        kn = cp.young * 2 * r[i] * r[j] / rr
-        li, lj = r[i] - 0.5 * (rr - dist), r[j] - 0.5 * (rr - dist)
-        vr = v[j] - v[i] + D @ d - np.cross(li * w[i] + lj * w[j], n)
-        mst = m[i] * m[j] / (m[i] + m[j])
-        fn = kn * (rr - dist) - 2 * cp.gamma * np.sqrt(mst * kn) * (vr @ n)
-        g = ft - (ft @ n) * n
-        cap = cp.friction * max(fn, 0.0)
-        if g @ g > cap * cap:
-            g *= cap / np.linalg.norm(g)
-        sigma += np.outer(d, g - fn * n)
-    sigma -= np.einsum("i,ia,ib->ab", m, v, v)
-    return sigma / np.linalg.det(h), len(i_all)
+def reference_stress(b, cp):
+    """Stress and contact count of RVE 0's state by test_reference.reference_step with
+    dt = 0 (nothing moves, no history added), at the batch's own L (cell control lc = L
+    gives L = lc h h^-1 = L)."""
+    st = {"h": b.h[0].copy(), "s": b.s[0].copy(), "v": b.v[0].copy(), "w": b.w[0].copy(),
+          "rot": b.rot[0].copy(), "radius": b.radius[0], "mass": b.mass[0],
+          "inertia": b.inertia[0], "ft": reference_history(b)}
+    _, _, stress, contacts = reference_step(st, cp, 0.0, b.L[0])
+    return stress, contacts
 
 
 @pytest.mark.parametrize("nsteps", [1, 2, 11])
@@ -101,7 +59,7 @@ def test_returned_stress_is_that_of_the_returned_state(packing, nsteps):
     dH[0, 2, 2] = -2e-4  # compression along z, sheared a little
     dH[0, 0, 1] = 5e-5
     engine.advance(b, nsteps, dt, cp, engine.increment_control(b, dH, nsteps, dt))
-    expected, contacts = numpy_stress(b, cp)
+    expected, contacts = reference_stress(b, cp)
     p = -np.trace(expected) / 3
     assert p > 5e4
     # round-off of ~1e3 contact terms of ~p each, with fastmath's reassociation
@@ -133,8 +91,10 @@ def test_one_step_modulus_is_bounded_by_the_one_the_time_step_uses():
     dt = engine.critical_dt(b0, cp)
     eps = 1e-6
     # the normal springs' (1/V) sum kn |d|^2 n_k^4
-    i, j, d = touching_pairs(b0)
     r = b0.radius[0]
+    pairs = np.array(sorted(brute_pairs(b0.h[0], b0.s[0], r, lambda i, j: r[i] + r[j])))
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = (b0.s[0][j] - b0.s[0][i] + decode_shifts(pairs[:, 2])) @ b0.h[0].T
     dist = np.linalg.norm(d, axis=1)
     kn = cp.young * 2 * r[i] * r[j] / (r[i] + r[j])
     kn_only = (kn[:, None] * d**4 / dist[:, None] ** 2).sum(axis=0) / b0.volume()[0]

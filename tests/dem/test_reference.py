@@ -32,7 +32,9 @@ def reference_history(b):
 
 def reference_step(st, p, dt, lc):
     """One step of the documented scheme; st: dict of h, s, v, w, rot, radius, mass,
-    inertia, ft (dict). Returns forces, torques and stress of the step."""
+    inertia, ft (dict). Returns forces, torques and stress of the step and its number
+    of contacts. With dt = 0 nothing moves and no history is added: the forces and
+    stress of the state as it is, the history projected onto the contact planes."""
     h, s, v, w = st["h"], st["s"], st["v"], st["w"]
     r = st["radius"]
     n = len(r)
@@ -55,7 +57,6 @@ def reference_step(st, p, dt, lc):
     ri, rj = r[i], r[j]
     nrm = d / dist[:, None]
     kn = p.young * 2 * ri * rj / (ri + rj)
-    fn = kn * (ri + rj - dist)
     # lever arms to the contact point in the middle of the overlap (li + lj = |d|)
     li = ri - 0.5 * (ri + rj - dist)
     lj = rj - 0.5 * (ri + rj - dist)
@@ -65,6 +66,9 @@ def reference_step(st, p, dt, lc):
     D = 0.5 * (L + L.T)
     vr = v[j] - v[i] + d @ D.T - np.cross(wa, nrm)
     vn = np.einsum("cd,cd->c", vr, nrm)
+    # linear spring and the normal dashpot of the restitution (p.gamma: 0 if elastic)
+    mst = st["mass"][i] * st["mass"][j] / (st["mass"][i] + st["mass"][j])
+    fn = kn * (ri + rj - dist) - 2 * p.gamma * np.sqrt(mst * kn) * vn
     f_old = np.array([st["ft"].get((int(a), int(c)), np.zeros(3)) for a, c in zip(i, j,
                                                                                   strict=True)])
     f_old = f_old.reshape(-1, 3)
@@ -74,7 +78,7 @@ def reference_step(st, p, dt, lc):
     g = f_old + np.cross(omega, f_old)
     g -= np.einsum("cd,cd->c", g, nrm)[:, None] * nrm
     g += (p.stiffness_ratio * kn)[:, None] * (vr - vn[:, None] * nrm) * dt
-    cap = p.friction * fn
+    cap = p.friction * np.maximum(fn, 0.0)
     mag = np.linalg.norm(g, axis=1)
     over = mag > cap
     g[over] *= (cap[over] / mag[over])[:, None]
