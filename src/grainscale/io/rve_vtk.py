@@ -55,16 +55,15 @@ def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0,
     touch = overlap > 0
     kn = young * 2.0 * ri * rj / (ri + rj)
     fn = kn * overlap
+    n = d / np.where(dist > 0, dist, 1.0)[:, None]
     if gamma > 0.0:
-        n = d / np.where(dist > 0, dist, 1.0)[:, None]
         L = batch.L[r]
         vrel = batch.v[r][j] - batch.v[r][rows_i] + d @ (0.5 * (L + L.T))
         vn = np.einsum("ca,ca->c", vrel, n)
         mi, mj = batch.mass[r][rows_i], batch.mass[r][j]
         fn = fn - 2.0 * gamma * np.sqrt(mi * mj / (mi + mj) * kn) * vn
     ft = batch.ft[r][rows_i, rows_k]
-    n = d[touch] / dist[touch, None]
-    fn, ft = fn[touch], ft[touch]
+    n, fn, ft = n[touch], fn[touch], ft[touch]
     ft = ft - np.einsum("ca,ca->c", ft, n)[:, None] * n
     cap = friction * np.maximum(fn, 0.0)
     norm = np.linalg.norm(ft, axis=1)
