@@ -11,12 +11,16 @@ per particle-step of a batch of `--big-batch` RVEs (default 64) of 800 spheres i
 on one thread, with the batch's parallel efficiency on all threads
 (`parallel_efficiency_batch`).
 
-`--device cuda` times the GPU kernel (dem/cuda_kernel.py) instead: a batch of `--rves`
-RVEs of 800 spheres (decorrelated copies) in the same shear, `--gpu-steps` steps per
-`engine.advance` call (one call is one MPM step: the state goes to the device and back
-once), best of 2. Its JSON line holds `ns_per_particle_step_cuda` (wall time of a call,
-transfers included, per particle-step) and `transfer_s` (a call of zero steps: the
-copies alone). Needs a GPU; the CPU figures are not taken in that mode.
+`--device cuda` times the GPU kernel (dem/cuda_kernel.py) instead, as a run drives it:
+a batch of `--rves` RVEs of `--particles` spheres (decorrelated copies) resident on the
+device (dem/device_batch.py), each `engine.advance` call one MPM increment of
+`--gpu-steps` DEM steps, best of 2. Its JSON line holds `ns_per_particle_step_cuda`
+(wall time of a call, transfers included, per particle-step), `bytes_per_rve_step`
+(bytes between host and device per RVE and call), `device_bytes_per_particle` (the
+resident state), `pull_s` (the whole state to the host, as a checkpoint does) and
+`per_call_over_resident` (the same call copying the state down and up, as a ratio).
+Runs on numba's simulator too: NUMBA_ENABLE_CUDASIM=1 ... --device cuda --rves 1
+--particles 90 --gpu-steps 2. The CPU figures are not taken in that mode.
 """
 
 from __future__ import annotations
@@ -128,51 +132,65 @@ def schedule_times(batch: RVEBatch, cp: engine.ContactParams, dt: float, nsteps:
 
 
 def cuda_throughput(base: RVEBatch, cp: engine.ContactParams, dt: float, rves: int,
-                    steps: int, threads: int) -> None:
-    """Print the GPU kernel's ns per particle-step for `rves` copies of base in shear."""
+                    steps: int, threads: int) -> dict:
+    """The GPU kernel on `rves` decorrelated copies of base, driven as a run drives it:
+    calls of `steps` DEM steps, each applying an MPM increment (axial compression at
+    0.1 /s) to state resident on the device (dem/device_batch.py). Returns the figures
+    (also printed), with the per-call path (state copied down and up every call) as a
+    ratio measured in the same run."""
     from numba import cuda
 
     from grainscale.dem import cuda_kernel
+    from grainscale.dem.device_batch import DeviceBatch
 
     engine.check_device("cuda")
     cuda_kernel.THREADS = threads  # the block size of engine.advance(device="cuda")
     n = base.n_particles
     print(f"building a batch of {rves} RVEs x {n} spheres ...")
     batch = decorrelated_batch(base, rves, np.random.default_rng(0))
-    ctrl = shear_control(batch)
-    engine.advance(batch, 10, dt, cp, ctrl, device="cuda")  # compile, build lists
-    best = np.inf
+    dH = np.zeros((rves, 3, 3))
+    dH[:, 2, 2] = -0.1 * steps * dt  # one MPM increment of axial strain at 0.1 /s
+    ctrl = engine.increment_control(batch, dH, steps, dt)
+    host_copy = batch.copy()
+    dev = DeviceBatch(batch)
+    engine.advance(dev, steps, dt, cp, ctrl)  # compile, build the lists
+    best, moved = np.inf, 0
     for _ in range(2):
-        b = batch.copy()
+        before = dev.moved
         t0 = time.perf_counter()
-        engine.advance(b, steps, dt, cp, ctrl, device="cuda")
+        engine.advance(dev, steps, dt, cp, ctrl)
         best = min(best, time.perf_counter() - t0)
-    # the copies alone: a call of zero steps (no RVE moves)
-    status = np.zeros(rves, np.int64)
-    out = np.zeros((rves, 5))
-    law = engine.contact_law(cp)
-    ctl = engine.Controls(float(dt), np.broadcast_to(np.eye(3), (rves, 3, 3)).copy(),
-                          np.zeros((rves, 3, 3)), ctrl.hdot_fixed, ctrl.l_ctrl,
-                          ctrl.servo_mask, ctrl.servo_target, float(ctrl.servo_gain),
-                          ctrl.max_rate)
+        moved = dev.moved - before
     t0 = time.perf_counter()
-    cuda_kernel.advance_batch(np.zeros(rves, np.int64), law, engine.rve_arrays(batch), ctl,
-                              status, out)
-    transfer = time.perf_counter() - t0
+    dev.pull()  # what a checkpoint or a retiling of every RVE costs
+    pull_s = time.perf_counter() - t0
+    # the per-call path: the whole state down and up around the same call
+    engine.advance(host_copy, steps, dt, cp, ctrl, device="cuda")
+    t0 = time.perf_counter()
+    engine.advance(host_copy, steps, dt, cp, ctrl, device="cuda")
+    per_call = time.perf_counter() - t0
     ns = best / (rves * n * steps) * 1e9
     try:
         name = cuda.get_current_device().name
         name = name.decode() if isinstance(name, bytes) else str(name)
     except AttributeError:  # numba's simulator has no device
         name = "simulator"
-    print(f"\nCUDA ({name}), {rves} RVEs x {n} spheres, triaxial shear, {steps} steps per "
-          f"call, {threads} threads per RVE, best of 2: {ns:.2f} ns/particle-step "
-          f"(transfers included; a call of zero steps: {transfer:.3f} s)")
-    print(json.dumps({
+    res = {
         "device": "cuda", "gpu": name, "ns_per_particle_step_cuda": round(ns, 3),
         "rves": rves, "particles": n, "steps_per_call": steps, "threads_per_block": threads,
-        "transfer_s": round(transfer, 4), "capacity": batch.capacity,
-    }))
+        "call_s": round(best, 5), "bytes_per_rve_step": moved / rves,
+        "device_bytes_per_particle": round(dev.device_bytes() / (rves * n), 1),
+        "capacity": batch.capacity, "longest_row": int(batch.nbr_count.max()),
+        "pull_s": round(pull_s, 4),
+        "per_call_over_resident": round(per_call / best, 3),
+    }
+    print(f"\nCUDA ({name}), {rves} RVEs x {n} spheres, {steps} DEM steps per call (one "
+          f"MPM increment), {threads} threads per RVE, best of 2: {ns:.2f} ns/particle-step, "
+          f"transfers included; {res['bytes_per_rve_step']:.0f} B moved per RVE and call; "
+          f"{res['device_bytes_per_particle']:.0f} B resident per sphere; copying the state "
+          f"down and up every call instead takes {res['per_call_over_resident']:.2f}x as long")
+    print(json.dumps(res))
+    return res
 
 
 def main() -> None:
@@ -189,12 +207,16 @@ def main() -> None:
                     help="DEM steps per engine.advance call with --device cuda")
     ap.add_argument("--gpu-threads", type=int, default=128,
                     help="threads per RVE (block size) with --device cuda")
+    ap.add_argument("--particles", type=int, default=800,
+                    help="spheres of the RVE (fewer for a smoke test on the simulator)")
     args = ap.parse_args()
     if args.device == "cuda":
         engine.check_device("cuda")  # before the minutes of generation
     steps = 2000 if args.quick else args.steps
-    params = RVEParams(preparation={"pressure": 100e3, "porosity": 0.373})
-    print("generating the unit-element RVE (800 spheres, n = 0.373, p = 100 kPa) ...")
+    params = RVEParams(particles=args.particles,
+                       preparation={"pressure": 100e3, "porosity": 0.373})
+    print(f"generating the unit-element RVE ({args.particles} spheres, n = 0.373, "
+          "p = 100 kPa) ...")
     base = generate(params)
     cp = contact_params(params)
     dt = engine.critical_dt(base, cp, params.numerics.timestep_safety)

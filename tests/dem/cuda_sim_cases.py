@@ -18,6 +18,7 @@ import time
 import tomllib
 from pathlib import Path
 
+import meshio
 import numpy as np
 import tomli_w
 
@@ -27,7 +28,8 @@ from dem_helpers import agitated_dense_state, brute_pairs  # noqa: E402
 from grainscale.analysis import read_columns  # noqa: E402
 from grainscale.cli import main as grainscale  # noqa: E402
 from grainscale.dem import cuda_kernel, engine  # noqa: E402
-from grainscale.dem.state import RVEBatch, concatenate, from_packing  # noqa: E402
+from grainscale.dem.device_batch import DeviceBatch  # noqa: E402
+from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_packing  # noqa: E402
 
 THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
@@ -127,6 +129,48 @@ def column(folder: Path) -> Path:
     return path
 
 
+def retiled_column(folder: Path) -> Path:
+    """`column` with every cell doubled at its first update (retile_width 20 grain
+    diameters, at most twice the spheres) and a probe RVE in its first cell: the resident
+    state pulled for the retiling, the probe frames and the checkpoints."""
+    case = tomllib.loads(column(folder).read_text())
+    case["materials"]["sand"].update(retile_width=20.0, retile_max_factor=2)
+    case["output"]["probes"] = [{"position": [0.005, 0.005, 0.005], "name": "p"}]
+    path = folder / "retiled.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
+def resumed_on_device(folder: Path) -> dict:
+    """The retiled column on the device, run through and run in two legs (stopped by
+    --max-steps 4 with a checkpoint every 2 steps, then --resume): whether the histories
+    and the probe's last frame agree bitwise, and the difference to the CPU's history."""
+    path = retiled_column(folder)
+    runs = {}
+    for name, legs in (("through", [[]]), ("legs", [["--max-steps", "4"], ["--resume"]]),
+                       ("cpu", [[]])):
+        out = folder / f"retiled_{name}"
+        device = "cpu" if name == "cpu" else "cuda"
+        for extra in legs:
+            code = grainscale(["run", str(path), "--out", str(out), "--quiet", "--threads",
+                               "1", "--device", device, "--checkpoint-every", "2", *extra])
+            assert code == 0, (name, extra, code)
+        runs[name] = out
+    text = {k: (v / "history.csv").read_text() for k, v in runs.items()}
+    probes = sorted((runs["through"] / "frames").glob("probe_p_*"))
+    last = {k: (runs[k] / "frames" / probes[-1].name).read_bytes() if probes else b""
+            for k in ("through", "legs")}
+    cpu, gpu = read_columns(runs["cpu"] / "history.csv"), read_columns(
+        runs["through"] / "history.csv")
+    frames = sorted((runs["through"] / "frames").glob("frame_*.vtu"))
+    particles = meshio.read(frames[-1]).point_data["rve_particles"] if frames else [0]
+    return {"same_history": text["through"] == text["legs"],
+            "same_probe": bool(probes) and last["through"] == last["legs"],
+            "probe_files": len(probes), "rows": text["through"].count("\n"),
+            "cpu_rel": max(rel(np.asarray(cpu[c]), np.asarray(gpu[c])) for c in cpu),
+            "particles": float(np.min(particles))}
+
+
 def coupled_runs() -> dict:
     """`grainscale run` of the shrunk unit element and column on both devices:
     per history column, max |cpu - cuda| / max |cpu| over the rows; and the rows."""
@@ -148,7 +192,39 @@ def coupled_runs() -> dict:
                 res[name] = rel(a, b)
                 res["last"][name] = float(a[-1])
             out[path.stem] = res
+        out["retiled"] = resumed_on_device(folder)
     return out
+
+
+def resident_against_per_call(base: RVEBatch, p: engine.ContactParams, dt: float) -> dict:
+    """Four MPM-like increments (a shear dH, 3 and 5 DEM steps) on a DeviceBatch and on
+    host batches copied to the device and back per call: whether every state array and
+    every per-call result agrees bitwise, the capacities, and the bytes moved per RVE in
+    the last call (steady running) and resident per particle."""
+    dH = np.zeros((base.n_rve, 3, 3))
+    dH[:, 0, 1] = 2e-4
+    dH[:, 2, 2] = -1e-4
+    nsteps = np.array([3, 5])[: base.n_rve]
+    per_call, dev = base.copy(), DeviceBatch(base.copy())
+    same_results = True
+    moved = 0
+    for _ in range(4):
+        ctrl = engine.increment_control(per_call, dH, nsteps, dt)
+        engine.advance(per_call, nsteps, dt, p, ctrl, device="cuda")
+        before = dev.moved
+        engine.advance(dev, nsteps, dt, p, ctrl)
+        moved = dev.moved - before
+        same_results &= all(np.array_equal(getattr(per_call, f), getattr(dev.host, f))
+                            for f in ("h", "stress", "stiffness", "ncontact", "unbalanced",
+                                      "kinetic"))
+    stale = not np.array_equal(per_call.s, dev.host.s)  # the host's s awaits a pull
+    host = dev.pull()
+    return {"same_results": bool(same_results), "stale_before_pull": bool(stale),
+            "same_state": {f: bool(np.array_equal(getattr(per_call, f), getattr(host, f)))
+                           for f in STATE_FIELDS},
+            "capacity": [base.capacity, per_call.capacity, host.capacity],
+            "bytes_per_rve_call": moved / base.n_rve,
+            "device_bytes_per_particle": dev.device_bytes() / (base.n_rve * base.n_particles)}
 
 
 def main() -> None:
@@ -260,7 +336,12 @@ def main() -> None:
     res["wide"]["common"] = len(brute_pairs(gpu.h[0], gpu.s[0] - np.floor(gpu.s[0]),
                                             gpu.radius[0], lambda i, j: np.full(len(i), common)))
 
-    # 7. the coupled runs: the MPM on the CPU, the RVEs on the device
+    # 7. the resident path (device_batch.py) against the per-call one: the same kernel
+    # on the same data, so bitwise; then the same with a capacity overflow to regrow
+    res["resident"] = resident_against_per_call(base, p, dt)
+    res["resident_overflow"] = resident_against_per_call(small, p, dt)
+
+    # 8. the coupled runs: the MPM on the CPU, the RVEs on the device
     res["coupled"] = coupled_runs()
     res["seconds"] = time.perf_counter() - t0
     print(json.dumps(res))

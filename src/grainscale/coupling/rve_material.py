@@ -15,6 +15,12 @@ Time integration (docs/coupling.md):
   loaded at a fixed, slow strain per DEM step, whatever the macroscopic rate.
 After each increment, cells sheared thin are re-expressed by a compact basis
 (dem/lattice.py), so strongly deformed RVEs keep their history instead of being reset.
+
+With device "cuda" the RVEs' state stays on the GPU for the whole run
+(dem/device_batch.py): each update sends the increments down and brings the stress,
+stiffness, cell and counts up; the rest of the state comes to the host only where it is
+read (`state` for checkpoints, `rve` for probes, cell reduction and retiling of the RVEs
+concerned), through `_sync` and `_sync_rows`.
 """
 
 from __future__ import annotations
@@ -88,6 +94,7 @@ class RVEMaterial:
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         engine.check_device(device)
         self.device = device
+        self._dev: dict[int, object] = {}  # id(group) -> its DeviceBatch (device "cuda")
         self.name = name
         self.params = params
         self.mode = mode
@@ -132,11 +139,44 @@ class RVEMaterial:
     def n_rve(self) -> int:
         return self.n_points
 
+    # ------------------------------------------------------------- device residency
+    def _device(self, batch: RVEBatch):
+        """The DeviceBatch of group `batch` (uploaded on first use), or the batch itself
+        on the CPU."""
+        if self.device != "cuda":
+            return batch
+        from grainscale.dem.device_batch import DeviceBatch
+
+        dev = self._dev.get(id(batch))
+        if dev is None or dev.host is not batch:
+            dev = self._dev[id(batch)] = DeviceBatch(batch)
+        return dev
+
+    def _sync(self) -> None:
+        """Bring every group's full state to the host (device "cuda"; no-op on the CPU)."""
+        for dev in self._dev.values():
+            dev.pull()
+
+    def _forget_devices(self) -> None:
+        """Drop the device copies of groups that are gone (after retiling or loading);
+        the current groups are uploaded again by their next update."""
+        self._dev = {id(b): self._dev[id(b)] for b in self.groups
+                     if id(b) in self._dev and self._dev[id(b)].host is b}
+
+    def device_bytes(self) -> int:
+        """Bytes of RVE state resident on the GPU (0 on the CPU)."""
+        return sum(d.device_bytes() for d in self._dev.values())
+
+    def bytes_moved(self) -> int:
+        """Bytes copied between host and GPU so far (0 on the CPU)."""
+        return sum(d.moved for d in self._dev.values())
+
     @property
     def batch(self) -> RVEBatch | None:
         """All RVEs as one batch, in point order, while they have one size (scripts)."""
         if not self.groups:
             return None
+        self._sync()
         if len(self.groups) > 1:
             raise ValueError(f"material {self.name!r}: RVEs of {len(self.groups)} sizes "
                              "(cells were retiled); use .groups")
@@ -149,6 +189,8 @@ class RVEMaterial:
         for b, rows in zip(self.groups, self.rows, strict=True):
             hit = np.flatnonzero(rows == point)
             if hit.size:
+                if id(b) in self._dev:
+                    self._dev[id(b)].pull(hit)
                 return b.take(hit)
         raise IndexError(f"material {self.name!r}: no RVE for point {point} here")
 
@@ -191,34 +233,57 @@ class RVEMaterial:
                 dt_dem = self.dt_crit
             try:
                 ctrl = engine.increment_control(batch, dH[rows], nsteps, dt_dem)
-                engine.advance(batch, nsteps, dt_dem, self.cp, ctrl, device=self.device)
+                target = self._device(batch)
+                engine.advance(target, nsteps, dt_dem, self.cp, ctrl, device=self.device)
             except engine.RVEError as err:
                 point = int(rows[err.rve])
                 point = point if self.local is None else int(self.local[point])
                 raise SimulationError(
                     f"material {self.name!r}, its point {point}: {err} (the run stops; "
                     "history and checkpoints so far are intact)") from None
-            lattice.reduce_cells(batch)
+            self._reduce_cells(batch, target)
             stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
             self.rve_steps += int(nsteps.sum())
             self.work[rows] += nsteps * (batch.n_particles + batch.ncontact)
         self._retile()
-        theta = self._per_point(homogenise.mean_rotation)
+        theta = self._mean_rotation()
         self.spin_rate = (theta - self.theta_prev) / dt
         self.theta_prev = theta
         self.substeps = most
         self.seconds += time.perf_counter() - t0
 
+    def _reduce_cells(self, batch: RVEBatch, target) -> None:
+        """lattice.reduce_cells of a group; on the GPU only the RVEs to reduce make the
+        round trip (their cells, current on the host after each update, say which)."""
+        if target is batch:
+            lattice.reduce_cells(batch)
+            return
+        todo = np.flatnonzero(lattice.needs_reduction(batch.h, lattice.REDUCE_TOL))
+        if todo.size:
+            target.pull(todo)
+            lattice.reduce_cells(batch)
+            target.push(todo)
+
+    def _mean_rotation(self) -> np.ndarray:
+        """(P,) homogenise.mean_rotation of each point's RVE, on the GPU where it lives."""
+        if self.device != "cuda":
+            return self._per_point(homogenise.mean_rotation)
+        return self._per_point(lambda b: self._device(b).mean_rotation())
+
     def _retile(self) -> None:
         """Double every cell narrower than retile_width mean diameters (dem/retile.py)."""
         if self.retile_width <= 0:
             return
+        if self.device == "cuda":  # the cells are current on the host, the rest is not
+            if not any(self._thin(b).any() for b in self.groups):
+                return
+            self._sync()
         pieces: dict[int, list[tuple[RVEBatch, np.ndarray]]] = {}  # by sphere count
         for batch, rows in zip(self.groups, self.rows, strict=True):
             n = batch.n_particles
             w = retile.widths(batch.h)
-            thin = w.min(axis=1) < self.retile_width * 2.0 * batch.radius.mean(axis=1)
+            thin = self._thin(batch)
             if 2 * n > self.max_particles or not thin.any():
                 pieces.setdefault(n, []).append((batch, rows))
                 continue
@@ -234,6 +299,12 @@ class RVEMaterial:
                 self.groups.append(parts[0][0] if len(parts) == 1
                                    else concatenate([b for b, _ in parts]))
                 self.rows.append(np.concatenate([r for _, r in parts]))
+        self._forget_devices()
+
+    def _thin(self, batch: RVEBatch) -> np.ndarray:
+        """(R,) cells of a group narrower than retile_width mean grain diameters."""
+        w = retile.widths(batch.h).min(axis=1)
+        return w < self.retile_width * 2.0 * batch.radius.mean(axis=1)
 
     def initial_stress(self) -> np.ndarray:
         """(P,3,3) sym(sigma) of the prepared RVEs' Love-Weber stress [Pa] (see update)."""
@@ -262,6 +333,7 @@ class RVEMaterial:
         count, `rve_capacity` its list capacity, restored on loading), and the
         material's per-point arrays."""
         capacity = np.zeros(self.n_points, np.int64)
+        self._sync()
         if self.groups:
             n = max(b.n_particles for b in self.groups)
             # the capacity only grows (retiling, overflows): tables cut to the rows'
@@ -305,6 +377,7 @@ class RVEMaterial:
         n = len(self.theta_prev)
         self.spin_rate = np.asarray(state.get("spin_rate", np.zeros(n)), float).copy()
         self.work = np.asarray(state.get("work", np.zeros(n)), float).copy()
+        self._forget_devices()
         # no refresh: the saved stress and moduli are already those of the saved state
 
     def point_fields(self) -> dict[str, np.ndarray]:
@@ -316,7 +389,7 @@ class RVEMaterial:
         return {
             "porosity": self._per_point(lambda b: b.porosity()),
             "coordination": self._per_point(homogenise.coordination),
-            "mean_rotation": self._per_point(homogenise.mean_rotation),
+            "mean_rotation": self.theta_prev.copy(),  # the last update's (or loaded)
             "rotation_rate": self.spin_rate,
             "rve_eps_v": self._per_point(homogenise.volumetric_strain),
             "rve_particles": self.particle_counts().astype(float),

@@ -880,13 +880,12 @@ CONTROL_ARGS = ("e_step", "l_mean", "hdot_fixed", "l_ctrl", "servo_mask", "servo
                 "max_rate")
 
 
-def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
-                  max_blocks: int = MAX_BLOCKS) -> None:
-    """Advance every RVE r by nsteps[r] steps on the GPU: kernel.advance_batch's
-    arguments (host arrays: RveState st, ContactLaw law, Controls ctl with the RVE index
-    first, status (R,), out (R,5)), results written back into them.
+def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_out,
+           threads: int | None = None, max_blocks: int = MAX_BLOCKS) -> None:
+    """Run the batch kernel on device arrays: d_nsteps (R,) int64, dev the state arrays
+    in STATE_ARGS order, dctl the controls in CONTROL_ARGS order, d_status (R,) int64,
+    d_out (R,5). Nothing crosses to the host (dem/device_batch.py keeps the state there).
 
-    Copies the state to the device once, runs every step there, and copies it back.
     `threads` is the block size (threads per RVE; default the module's THREADS, read at
     each call, which is how engine.advance's callers choose it); `max_blocks` bounds the
     blocks in flight, and so the scratch: per block 6 doubles per list slot (entry
@@ -894,26 +893,38 @@ def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
     threads = THREADS if threads is None else int(threads)
     if threads not in _KERNELS:
         _KERNELS[threads] = _make_kernel(threads)
-    kernel = _KERNELS[threads]
-    nrve, n = st.s.shape[:2]
+    nrve, n = dev[1].shape[:2]  # s
     if nrve == 0:
         return
-    cap = st.nbr_j.shape[2]
+    cap = dev[STATE_ARGS.index("nbr_j")].shape[2]
     blocks = max(1, min(nrve, int(max_blocks)))
+    ent, rev, revc, old_j, old_code = _scratch(blocks, n, cap)
+    _KERNELS[threads][blocks, threads](
+        d_nsteps, float(law.young), float(law.kt_ratio), float(law.friction),
+        float(law.gamma), float(law.damping), float(law.skin), float(dt), float(servo_gain),
+        *dev, *dctl, d_status, d_out, ent, rev, revc, old_j, old_code)
+
+
+def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
+                  max_blocks: int = MAX_BLOCKS) -> None:
+    """Advance every RVE r by nsteps[r] steps on the GPU: kernel.advance_batch's
+    arguments (host arrays: RveState st, ContactLaw law, Controls ctl with the RVE index
+    first, status (R,), out (R,5)), results written back into them.
+
+    The per-call path: copies the state to the device, runs every step there (`launch`),
+    and copies it back. A run keeps its state on the device instead (device_batch.py)."""
+    if st.s.shape[0] == 0:
+        return
     host = [getattr(st, name) for name in STATE_ARGS]
     for name, a in zip(STATE_ARGS, host, strict=True):
         if not a.flags.c_contiguous:
             raise ValueError(f"RVE state array {name!r} is not C-contiguous")
     dev = [cuda.to_device(a) for a in host]
     dctl = [cuda.to_device(np.ascontiguousarray(getattr(ctl, name))) for name in CONTROL_ARGS]
-    d_nsteps = cuda.to_device(np.ascontiguousarray(nsteps, np.int64))
     d_status = cuda.to_device(status)
     d_out = cuda.to_device(out)
-    ent, rev, revc, old_j, old_code = _scratch(blocks, n, cap)
-    kernel[blocks, threads](d_nsteps, float(law.young), float(law.kt_ratio),
-                            float(law.friction), float(law.gamma), float(law.damping),
-                            float(law.skin), float(ctl.dt), float(ctl.servo_gain), *dev,
-                            *dctl, d_status, d_out, ent, rev, revc, old_j, old_code)
+    launch(cuda.to_device(np.ascontiguousarray(nsteps, np.int64)), law, dev, dctl, ctl.dt,
+           ctl.servo_gain, d_status, d_out, threads, max_blocks)
     for name, a, d in zip(STATE_ARGS, host, dev, strict=True):
         if name not in READ_ONLY:
             d.copy_to_host(a)

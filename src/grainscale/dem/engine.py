@@ -190,8 +190,8 @@ def check_device(device: str) -> None:
                               "the `cuda` extra (pip install grainscale[cuda])")
 
 
-def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
-            control: Control, device: str = "cpu") -> RVEBatch:
+def advance(batch, nsteps, dt: float, params: ContactParams,
+            control: Control, device: str = "cpu"):
     """Advance every RVE by nsteps (int or (R,) array) steps of dt, in place; then each
     RVE that stepped has the stress, moduli and contact count of the state it reached
     (kernel.py, item 8). nsteps = -1: no step, only that evaluation (refresh).
@@ -199,21 +199,29 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
     device "cpu" runs kernel.advance_batch (numba threads over RVEs), "cuda"
     cuda_kernel.advance_batch (one GPU block per RVE; the state goes to the device and
     back once per pass of the loop below, i.e. once per call unless a list overflows):
-    the same physics, agreeing at round-off (cuda_kernel's docstring)."""
-    if device == "cpu":
+    the same physics, agreeing at round-off (cuda_kernel's docstring).
+
+    `batch` may also be a device_batch.DeviceBatch, whose state stays on the GPU (device
+    is then "cuda" whatever is passed): only the step counts, controls and per-RVE
+    results cross, and a capacity regrowth pulls, regrows and pushes explicitly."""
+    resident = not isinstance(batch, RVEBatch)
+    host = batch.host if resident else batch
+    if resident:
+        step_batch = None
+    elif device == "cpu":
         step_batch = advance_batch
     else:
         check_device(device)
         from grainscale.dem import cuda_kernel
 
         step_batch = cuda_kernel.advance_batch
-    remaining = np.broadcast_to(np.asarray(nsteps, np.int64), (batch.n_rve,)).copy()
+    remaining = np.broadcast_to(np.asarray(nsteps, np.int64), (host.n_rve,)).copy()
     if np.any(remaining < -1):
         raise ValueError(f"nsteps = {int(remaining.min())}: must be >= -1")
     owed = remaining != 0  # the end-of-increment evaluation is still to be done
-    status = np.zeros(batch.n_rve, np.int64)
-    out = np.zeros((batch.n_rve, 5))
-    r = batch.n_rve
+    status = np.zeros(host.n_rve, np.int64)
+    out = np.zeros((host.n_rve, 5))
+    r = host.n_rve
     max_rate = control.max_rate if control.max_rate is not None else np.zeros(r)
     e_step = control.e_step if control.e_step is not None else np.broadcast_to(
         np.eye(3), (r, 3, 3)).copy()
@@ -227,13 +235,16 @@ def advance(batch: RVEBatch, nsteps, dt: float, params: ContactParams,
         # An RVE whose steps are done but whose evaluation a list overflow stopped is
         # called with -1; one owing nothing with 0 (it keeps its outputs)
         call = np.where(remaining > 0, remaining, np.where(owed, -1, 0))
-        step_batch(call, law, rve_arrays(batch), ctl, status, out)
+        if resident:
+            batch.step(call, law, ctl, status, out)
+        else:
+            step_batch(call, law, rve_arrays(batch), ctl, status, out)
         done = out[:, 4].astype(np.int64)
         remaining -= done
         ended = owed & (remaining <= 0) & (status == Status.OK)
-        batch.ncontact[ended] = out[ended, 0]
-        batch.unbalanced[ended] = out[ended, 1]
-        batch.kinetic[ended] = out[ended, 2]
+        host.ncontact[ended] = out[ended, 0]
+        host.unbalanced[ended] = out[ended, 1]
+        host.kinetic[ended] = out[ended, 2]
         owed &= ~ended
         _check(batch, status, out)
     return batch
@@ -275,15 +286,22 @@ def not_finite(batch: RVEBatch) -> np.ndarray:
     return out
 
 
-def _check(batch: RVEBatch, status: np.ndarray, out: np.ndarray) -> None:
-    bad = not_finite(batch) | (status == Status.NOT_FINITE)
+def _check(batch, status: np.ndarray, out: np.ndarray) -> None:
+    """Errors of a kernel pass, and a capacity regrowth on overflow; `batch` an RVEBatch
+    or a DeviceBatch (checked on the device; regrown on the host, then pushed)."""
+    resident = not isinstance(batch, RVEBatch)
+    bad = (batch.not_finite() if resident else not_finite(batch)) | (
+        status == Status.NOT_FINITE)
     if np.any(bad):
         r = int(np.argmax(bad))
         raise RVEError(r,
             f"RVE {r}: motion became non-finite (time step too large for the stiffness?)")
     if np.any(status == Status.OVERFLOW):
         need = int(out[status == Status.OVERFLOW, 3].max())
-        grow_capacity(batch, max(need + 4, int(1.5 * batch.capacity)))
+        host = batch.pull() if resident else batch
+        grow_capacity(host, max(need + 4, int(1.5 * host.capacity)))
+        if resident:
+            batch.push()
     if np.any(status == Status.TOO_THIN):
         r = int(np.argmax(status == Status.TOO_THIN))
         raise RVEError(r,

@@ -32,7 +32,10 @@ def needs_reduction(h: np.ndarray, tol: float = 0.5 + 1e-9) -> np.ndarray:
     return np.any(off > tol, axis=(1, 2))
 
 
-def reduce_cells(batch: RVEBatch, tol: float = 0.75) -> np.ndarray:
+REDUCE_TOL = 0.75  # reduce_cells' default: a cell is re-expressed beyond this
+
+
+def reduce_cells(batch: RVEBatch, tol: float = REDUCE_TOL) -> np.ndarray:
     """Re-express every cell that fails the Lagrange condition by `tol`; returns their ids.
 
     Positions are wrapped into the new cell, list shifts transformed, and a list rebuild
