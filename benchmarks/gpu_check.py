@@ -1,0 +1,295 @@
+"""The GPU check, one prepared script for a short lease of a GPU machine (issue: the GPU
+path made real). Everything it measures goes to OUT/gpu_check.json, rewritten after each
+section, so a run cut short still returns what it measured.
+
+    python benchmarks/gpu_check.py --prepare gpu_inputs      # here, on the CPU: packings
+    python benchmarks/gpu_check.py --inputs gpu_inputs --out OUT [--budget 420]
+
+Sections, each timed and guarded (an error is recorded, the next section runs):
+1. `env`: GPU, driver, numba and numba-cuda versions, CPU cores.
+2. `tests`: tests/dem/test_cuda_kernel.py on the hardware (its "gpu" cases: the kernel
+   against the CPU on tiny batches, the resident path against the per-call one bitwise,
+   `grainscale run --device cuda` of the shrunk unit element and column against the CPU).
+3. `throughput`: the resident kernel (dem/device_batch.py) as a run drives it, one MPM
+   increment of axial strain per call, in ns per particle-step with transfers included,
+   for RVEs of 150, 300 and 800 spheres at 1,000, 10,000 and 50,000 RVEs (as memory and
+   the time budget allow) and block sizes 64, 128 and 256 on the 800-sphere RVE; per
+   configuration also the bytes moved per RVE and call, the resident bytes per sphere,
+   the time of a call of zero steps (launch and small copies: the per-MPM-step transfer
+   cost), of a full pull (a checkpoint's), and the per-call path's time as a ratio.
+4. `column`: examples/column_collapse/quick.toml for --steps MPM steps with --device cuda
+   and on all CPU cores: wall time and DEM seconds per MPM step of each (cost.json).
+
+The packings (--prepare) are the unit element's recipe at 100 kPa (porosity 0.373),
+sheared to 2 % axial strain so that contacts slide and lists churn, as in
+dem_throughput.py; prepared on the CPU beforehand, since generating an 800-sphere RVE
+takes minutes that a lease should not pay.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZES = (150, 300, 800)
+COUNTS = (1_000, 10_000, 50_000)
+BLOCKS = (64, 128, 256)
+
+
+def prepare(folder: Path) -> None:
+    """Generate the packings of SIZES and save their full state (npz) into folder; the
+    quick column's packings are cached by `grainscale run ... --out folder/column
+    --max-steps 1`."""
+    from grainscale.config.rve import RVEParams
+    from grainscale.dem import engine
+    from grainscale.dem.generate import contact_params, generate
+    from grainscale.dem.state import state_arrays
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from dem_throughput import shear_control
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for n in SIZES:
+        params = RVEParams(particles=n, preparation={"pressure": 100e3, "porosity": 0.373})
+        t0 = time.perf_counter()
+        base = generate(params)
+        cp = contact_params(params)
+        dt = engine.critical_dt(base, cp, params.numerics.timestep_safety)
+        engine.advance(base, int(0.02 / (0.1 * dt) / 10), dt, cp, shear_control(base, 1.0))
+        np.savez(folder / f"rve_{n}.npz", dt=dt, young=cp.young,
+                 ratio=cp.stiffness_ratio, friction=cp.friction, damping=cp.damping,
+                 skin=cp.skin, **state_arrays(base))
+        print(f"{n} spheres: {time.perf_counter() - t0:.0f} s, capacity {base.capacity}, "
+              f"longest row {int(base.nbr_count.max())}", flush=True)
+
+
+def load(folder: Path, n: int):
+    from grainscale.dem import engine
+    from grainscale.dem.state import STATE_FIELDS, from_state_arrays
+
+    z = np.load(folder / f"rve_{n}.npz")
+    base = from_state_arrays({k: z[k] for k in STATE_FIELDS})
+    cp = engine.ContactParams(float(z["young"]), float(z["ratio"]), float(z["friction"]),
+                              float(z["damping"]), float(z["skin"]))
+    return base, cp, float(z["dt"])
+
+
+def tiled(base, count: int, rng):
+    """count copies of a one-RVE batch, velocities perturbed by 1e-4 m/s (decorrelated)."""
+    from dataclasses import fields
+
+    from grainscale.dem.state import RVEBatch
+
+    b = RVEBatch(**{f.name: np.repeat(getattr(base, f.name), count, axis=0)
+                    for f in fields(RVEBatch)})
+    b.v += rng.normal(0.0, 1e-4, b.v.shape)
+    return b
+
+
+class Report:
+    def __init__(self, out: Path):
+        self.out = out
+        self.data: dict = {}
+        out.mkdir(parents=True, exist_ok=True)
+
+    def save(self) -> None:
+        (self.out / "gpu_check.json").write_text(json.dumps(self.data, indent=1))
+
+    def section(self, name, fn, *args):
+        t0 = time.perf_counter()
+        try:
+            self.data[name] = fn(*args)
+        except Exception as err:  # recorded; the next section still runs
+            self.data[name] = {"error": f"{type(err).__name__}: {err}"}
+        self.data.setdefault("seconds", {})[name] = round(time.perf_counter() - t0, 1)
+        print(f"== {name}: {self.data['seconds'][name]} s", flush=True)
+        self.save()
+
+
+def env() -> dict:
+    import numba
+    from numba import cuda
+
+    out = {"python": platform.python_version(), "numba": numba.__version__,
+           "cpus": os.cpu_count()}
+    try:
+        import numba_cuda
+        out["numba_cuda"] = getattr(numba_cuda, "__version__", "?")
+    except ImportError:
+        out["numba_cuda"] = None
+    out["available"] = bool(cuda.is_available())
+    dev = cuda.get_current_device()
+    name = dev.name
+    out["gpu"] = name.decode() if isinstance(name, bytes) else str(name)
+    out["compute_capability"] = list(dev.compute_capability)
+    out["sms"] = int(getattr(dev, "MULTIPROCESSOR_COUNT", 0))
+    free, total = cuda.current_context().get_memory_info()
+    out["memory_gb"] = [round(free / 1e9, 1), round(total / 1e9, 1)]
+    smi = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version,clocks.max.sm",
+                          "--format=csv,noheader"], capture_output=True, text=True)
+    out["nvidia_smi"] = smi.stdout.strip()
+    return out
+
+
+def tests(budget: float) -> dict:
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                          "tests/dem/test_cuda_kernel.py", "-k", "not simulator",
+                          "-o", "addopts="], cwd=ROOT, capture_output=True, text=True,
+                         timeout=budget)
+    tail = (run.stdout + run.stderr)[-4000:]
+    return {"returncode": run.returncode, "tail": tail}
+
+
+def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool) -> dict:
+    """One configuration of the resident kernel (see the module docstring, 3.)."""
+    from grainscale.dem import cuda_kernel, engine
+    from grainscale.dem.device_batch import DeviceBatch
+
+    cuda_kernel.THREADS = threads
+    batch = tiled(base, count, np.random.default_rng(0))
+    dH = np.zeros((count, 3, 3))
+    dH[:, 2, 2] = -0.1 * steps * dt  # one MPM increment of axial strain at 0.1 /s
+    ctrl = engine.increment_control(batch, dH, steps, dt)
+    host = batch.copy() if per_call else None
+    t0 = time.perf_counter()
+    dev = DeviceBatch(batch)
+    push_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    engine.advance(dev, steps, dt, cp, ctrl)  # compiles (first time), builds the lists
+    first_s = time.perf_counter() - t0
+    best, moved = np.inf, 0
+    for _ in range(2):
+        before = dev.moved
+        t0 = time.perf_counter()
+        engine.advance(dev, steps, dt, cp, ctrl)
+        best = min(best, time.perf_counter() - t0)
+        moved = dev.moved - before
+    status = np.zeros(count, np.int64)
+    out = np.zeros((count, 5))
+    law = engine.contact_law(cp)
+    kctl = engine.Controls(float(dt), ctrl.e_step, ctrl.l_mean, ctrl.hdot_fixed,
+                           ctrl.l_ctrl, ctrl.servo_mask, ctrl.servo_target, 0.0,
+                           ctrl.max_rate)
+    t0 = time.perf_counter()
+    dev.step(np.zeros(count, np.int64), law, kctl, status, out)
+    zero_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    dev.pull()
+    pull_s = time.perf_counter() - t0
+    res = {"rves": count, "particles": base.n_particles, "threads": threads,
+           "steps_per_call": steps, "call_s": round(best, 5),
+           "ns_per_particle_step": round(best / (count * base.n_particles * steps) * 1e9, 4),
+           "first_call_s": round(first_s, 3), "zero_step_call_s": round(zero_s, 5),
+           "push_s": round(push_s, 4), "pull_s": round(pull_s, 4),
+           "bytes_per_rve_step": moved / count,
+           "device_bytes_per_particle": round(dev.device_bytes() / (count * base.n_particles), 1),
+           "capacity": batch.capacity, "longest_row": int(batch.nbr_count.max())}
+    if per_call:
+        engine.advance(host, steps, dt, cp, ctrl, device="cuda")
+        t0 = time.perf_counter()
+        engine.advance(host, steps, dt, cp, ctrl, device="cuda")
+        res["per_call_over_resident"] = round((time.perf_counter() - t0) / best, 3)
+    del dev
+    return res
+
+
+def throughput(inputs: Path, deadline: float) -> list:
+    """The grid of 3., cheapest first; a configuration predicted to overrun the
+    deadline (from the last ns per particle-step) is skipped and marked so."""
+    rows = []
+    ns_est = 5.0  # ns per particle-step guessed before the first measurement
+    plan = [(n, c, 128) for n in SIZES for c in COUNTS]
+    plan += [(800, 10_000, t) for t in BLOCKS if t != 128]
+    plan.sort(key=lambda p: p[0] * p[1])
+    for n, count, threads in plan:
+        base, cp, dt = load(inputs, n)
+        steps = int(np.clip(0.4 / (count * n * ns_est * 1e-9), 2, 50))
+        predicted = 5 * count * n * steps * ns_est * 1e-9 + 2e-5 * count * n  # + copies
+        if time.perf_counter() + predicted > deadline:
+            rows.append({"rves": count, "particles": n, "threads": threads,
+                         "skipped": f"predicted {predicted:.0f} s beyond the budget"})
+            continue
+        try:
+            r = measure(base, cp, dt, count, threads, steps,
+                        per_call=(count == 10_000 and threads == 128))
+            ns_est = max(r["ns_per_particle_step"], 0.05)
+        except Exception as err:
+            r = {"rves": count, "particles": n, "threads": threads,
+                 "error": f"{type(err).__name__}: {err}"}
+        rows.append(r)
+        print(json.dumps(r), flush=True)
+    return rows
+
+
+CLI = "import sys; from grainscale.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def column(inputs: Path, steps: int, budget: float) -> dict:
+    """The quick column for `steps` MPM steps on the GPU and on every CPU core, from the
+    packings --prepare cached (inputs/column/packings)."""
+    res = {}
+    case = ROOT / "examples" / "column_collapse" / "quick.toml"
+    for device in ("cuda", "cpu"):
+        out = Path("/tmp") / f"column_{device}"
+        if (inputs / "column" / "packings").is_dir():
+            shutil.copytree(inputs / "column" / "packings", out / "packings",
+                            dirs_exist_ok=True)
+        t0 = time.perf_counter()
+        run = subprocess.run([sys.executable, "-c", CLI, "run", str(case),
+                              "--out", str(out), "--quiet", "--max-steps", str(steps),
+                              "--device", device, "--threads", str(os.cpu_count())],
+                             cwd=ROOT, capture_output=True, text=True, timeout=budget / 2)
+        r = {"returncode": run.returncode, "wall_s": round(time.perf_counter() - t0, 1)}
+        if run.returncode != 0:
+            r["tail"] = (run.stdout + run.stderr)[-2000:]
+        cost = out / "cost.json"
+        if cost.exists():
+            r["cost"] = json.loads(cost.read_text())
+        hist = out / "history.csv"
+        if hist.exists():
+            lines = [ln for ln in hist.read_text().splitlines() if not ln.startswith("#")]
+            r["history_last"] = dict(zip(lines[0].split(","), lines[-1].split(","),
+                                         strict=False))
+        res[device] = r
+    return res
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--prepare", type=Path, help="generate the packings into this folder")
+    ap.add_argument("--inputs", type=Path, default=ROOT / "gpu_inputs")
+    ap.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "gpu_out")))
+    ap.add_argument("--budget", type=float, default=420.0, help="seconds for all sections")
+    ap.add_argument("--steps", type=int, default=300, help="MPM steps of the column")
+    ap.add_argument("--skip", nargs="*", default=[], help="sections to leave out")
+    args = ap.parse_args()
+    if args.prepare:
+        prepare(args.prepare)
+        return
+    start = time.perf_counter()
+    rep = Report(args.out)
+    rep.section("env", env)
+    if "tests" not in args.skip:
+        rep.section("tests", tests, 0.4 * args.budget)
+    if "throughput" not in args.skip:
+        rep.section("throughput", throughput, args.inputs,
+                    start + (0.8 if "column" not in args.skip else 0.95) * args.budget)
+    if "column" not in args.skip:
+        left = args.budget - (time.perf_counter() - start)
+        rep.section("column", column, args.inputs, args.steps, max(left, 30.0))
+    rep.data["total_s"] = round(time.perf_counter() - start, 1)
+    rep.save()
+
+
+if __name__ == "__main__":
+    main()
