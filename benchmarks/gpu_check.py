@@ -20,6 +20,10 @@ Sections, each timed and guarded (an error is recorded, the next section runs):
 4. `column`: examples/column_collapse/quick.toml for --steps MPM steps with --device cuda
    and on all CPU cores: wall time and DEM seconds per MPM step of each (cost.json).
 
+On a machine without network (the lent GPU machines), the Python packages missing there
+travel as wheels, with numpy 2.4: numba-cuda 0.30.4's compiler calls `np.row_stack`,
+which numpy 2.5 removed. Figures of 2026-11-26 on an H100: docs/performance.md.
+
 The packings (--prepare) are the unit element's recipe at 100 kPa (porosity 0.373),
 sheared to 2 % axial strain so that contacts slide and lists churn, as in
 dem_throughput.py; prepared on the CPU beforehand, since generating an 800-sphere RVE
@@ -203,18 +207,21 @@ def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool) 
     return res
 
 
-def throughput(inputs: Path, deadline: float) -> list:
-    """The grid of 3., cheapest first; a configuration predicted to overrun the
-    deadline (from the last ns per particle-step) is skipped and marked so."""
+def throughput(inputs: Path, deadline: float, configs: list[str] | None = None) -> list:
+    """The grid of 3. (or `configs`, "SPHERESxRVESxTHREADS" each), cheapest first; a
+    configuration predicted to overrun the deadline (from the last ns per
+    particle-step, and ~0.3 us per sphere of tiling and copies) is skipped and marked."""
     rows = []
-    ns_est = 5.0  # ns per particle-step guessed before the first measurement
+    ns_est = 1.5  # ns per particle-step (measured on an H100, 2026-11-26) until measured
     plan = [(n, c, 128) for n in SIZES for c in COUNTS]
     plan += [(800, 10_000, t) for t in BLOCKS if t != 128]
+    if configs:
+        plan = [tuple(int(v) for v in c.split("x")) for c in configs]
     plan.sort(key=lambda p: p[0] * p[1])
     for n, count, threads in plan:
         base, cp, dt = load(inputs, n)
-        steps = int(np.clip(0.4 / (count * n * ns_est * 1e-9), 2, 50))
-        predicted = 5 * count * n * steps * ns_est * 1e-9 + 2e-5 * count * n  # + copies
+        steps = int(np.clip(0.4 / (count * n * ns_est * 1e-9), 10, 50))
+        predicted = 5 * count * n * steps * ns_est * 1e-9 + 3e-7 * count * n  # + copies
         if time.perf_counter() + predicted > deadline:
             rows.append({"rves": count, "particles": n, "threads": threads,
                          "skipped": f"predicted {predicted:.0f} s beyond the budget"})
@@ -234,34 +241,49 @@ def throughput(inputs: Path, deadline: float) -> list:
 CLI = "import sys; from grainscale.cli import main; sys.exit(main(sys.argv[1:]))"
 
 
-def column(inputs: Path, steps: int, budget: float) -> dict:
-    """The quick column for `steps` MPM steps on the GPU and on every CPU core, from the
-    packings --prepare cached (inputs/column/packings)."""
-    res = {}
-    case = ROOT / "examples" / "column_collapse" / "quick.toml"
-    for device in ("cuda", "cpu"):
-        out = Path("/tmp") / f"column_{device}"
-        if (inputs / "column" / "packings").is_dir():
-            shutil.copytree(inputs / "column" / "packings", out / "packings",
-                            dirs_exist_ok=True)
-        t0 = time.perf_counter()
-        run = subprocess.run([sys.executable, "-c", CLI, "run", str(case),
-                              "--out", str(out), "--quiet", "--max-steps", str(steps),
-                              "--device", device, "--threads", str(os.cpu_count())],
-                             cwd=ROOT, capture_output=True, text=True, timeout=budget / 2)
-        r = {"returncode": run.returncode, "wall_s": round(time.perf_counter() - t0, 1)}
-        if run.returncode != 0:
-            r["tail"] = (run.stdout + run.stderr)[-2000:]
-        cost = out / "cost.json"
-        if cost.exists():
-            r["cost"] = json.loads(cost.read_text())
-        hist = out / "history.csv"
-        if hist.exists():
-            lines = [ln for ln in hist.read_text().splitlines() if not ln.startswith("#")]
-            r["history_last"] = dict(zip(lines[0].split(","), lines[-1].split(","),
-                                         strict=False))
-        res[device] = r
+def column(inputs: Path, steps: list[int], budget: float,
+           devices: tuple[str, ...] = ("cuda", "cpu")) -> dict:
+    """The quick column for each of `steps` MPM steps on the GPU and on every CPU core,
+    from the packings --prepare cached (inputs/column/packings). Two step counts give
+    the steady cost per step by difference, free of start-up and kernel compilation."""
+    res = {"warm_up": _column_run(inputs, 2, "cpu", budget / 4)}  # compiles the CPU code
+    for n in steps:
+        for device in devices:
+            res[f"{device}_{n}"] = _column_run(inputs, n, device, budget / (2 * len(steps)))
+    if len(steps) == 2:
+        a, b = steps
+        for device in devices:
+            ra, rb = res.get(f"{device}_{a}", {}), res.get(f"{device}_{b}", {})
+            if "cost" in ra and "cost" in rb:
+                res[f"{device}_steady_s_per_step"] = round(
+                    (rb["cost"]["wall_seconds"] - ra["cost"]["wall_seconds"]) / (b - a), 5)
     return res
+
+
+def _column_run(inputs: Path, steps: int, device: str, timeout: float) -> dict:
+    """One `grainscale run` of the quick column: wall time, cost.json, last history row."""
+    case = ROOT / "examples" / "column_collapse" / "quick.toml"
+    out = Path("/tmp") / f"column_{device}_{steps}"
+    if (inputs / "column" / "packings").is_dir():
+        shutil.copytree(inputs / "column" / "packings", out / "packings",
+                        dirs_exist_ok=True)
+    t0 = time.perf_counter()
+    run = subprocess.run([sys.executable, "-c", CLI, "run", str(case),
+                          "--out", str(out), "--quiet", "--max-steps", str(steps),
+                          "--device", device, "--threads", str(os.cpu_count())],
+                         cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    r = {"returncode": run.returncode, "wall_s": round(time.perf_counter() - t0, 1)}
+    if run.returncode != 0:
+        r["tail"] = (run.stdout + run.stderr)[-2000:]
+    cost = out / "cost.json"
+    if cost.exists():
+        r["cost"] = json.loads(cost.read_text())
+    hist = out / "history.csv"
+    if hist.exists():
+        lines = [ln for ln in hist.read_text().splitlines() if not ln.startswith("#")]
+        r["history_last"] = dict(zip(lines[0].split(","), lines[-1].split(","),
+                                     strict=False))
+    return r
 
 
 def main() -> None:
@@ -270,7 +292,11 @@ def main() -> None:
     ap.add_argument("--inputs", type=Path, default=ROOT / "gpu_inputs")
     ap.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "gpu_out")))
     ap.add_argument("--budget", type=float, default=420.0, help="seconds for all sections")
-    ap.add_argument("--steps", type=int, default=300, help="MPM steps of the column")
+    ap.add_argument("--steps", type=int, nargs="+", default=[100, 600],
+                    help="MPM steps of the column runs (two: the steady cost by difference)")
+    ap.add_argument("--configs", nargs="*", help="throughput SPHERESxRVESxTHREADS only")
+    ap.add_argument("--devices", nargs="+", default=["cuda", "cpu"],
+                    help="devices of the column runs")
     ap.add_argument("--skip", nargs="*", default=[], help="sections to leave out")
     args = ap.parse_args()
     if args.prepare:
@@ -283,10 +309,12 @@ def main() -> None:
         rep.section("tests", tests, 0.4 * args.budget)
     if "throughput" not in args.skip:
         rep.section("throughput", throughput, args.inputs,
-                    start + (0.8 if "column" not in args.skip else 0.95) * args.budget)
+                    start + (0.45 if "column" not in args.skip else 0.95) * args.budget,
+                    args.configs)
     if "column" not in args.skip:
         left = args.budget - (time.perf_counter() - start)
-        rep.section("column", column, args.inputs, args.steps, max(left, 30.0))
+        rep.section("column", column, args.inputs, args.steps, max(left, 30.0),
+                    tuple(args.devices))
     rep.data["total_s"] = round(time.perf_counter() - start, 1)
     rep.save()
 

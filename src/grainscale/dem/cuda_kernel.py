@@ -10,10 +10,10 @@ unbalanced-force ratio, kinetic energy [J], row length a build asked for, steps 
 
 Layout. One thread block per RVE (a block loops over RVEs r = blockIdx, blockIdx +
 gridDim, ... so that the scratch below is needed per block, not per RVE); its threads
-stride over particles (thread t takes i = t, t + T, t + 2T, ...). The state (the
-RveState and Controls arrays, `link` aside) is copied to the device once per call of
-`advance_batch` and back at its end, so one `engine.advance` (one MPM step) costs one
-round trip, plus one per capacity regrowth. Per step of an RVE:
+stride over particles (thread t takes i = t, t + T, t + 2T, ...). `launch` runs it on
+device arrays (the RveState arrays, `link` aside, and the Controls): a run keeps them on
+the device (device_batch.py); `advance_batch` copies host arrays down and back around
+one call. Per step of an RVE:
 
 1. list build, if flagged: brute force over pairs j > i, each listed when closer than
    r_i + r_j + skin (as on the CPU). A cell at least twice the largest cutoff 2 r_max +
@@ -52,8 +52,8 @@ Guarantees.
   round-off (chaotic grain collisions), so over many steps RVEs agree statistically, not
   pointwise. Status codes, step counts and contact counts agree exactly as long as no
   contact sits within round-off of touching.
-Not measured on a GPU yet (docs/performance.md): the simulator (NUMBA_ENABLE_CUDASIM=1)
-runs it in tests/dem/test_cuda_kernel.py.
+tests/dem/test_cuda_kernel.py runs it on numba's simulator (NUMBA_ENABLE_CUDASIM=1)
+and, where one is usable, on a GPU; measured on an H100 in docs/performance.md.
 """
 
 from __future__ import annotations

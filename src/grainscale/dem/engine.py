@@ -197,9 +197,9 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
     (kernel.py, item 8). nsteps = -1: no step, only that evaluation (refresh).
 
     device "cpu" runs kernel.advance_batch (numba threads over RVEs), "cuda"
-    cuda_kernel.advance_batch (one GPU block per RVE; the state goes to the device and
-    back once per pass of the loop below, i.e. once per call unless a list overflows):
-    the same physics, agreeing at round-off (cuda_kernel's docstring).
+    cuda_kernel.advance_batch (one GPU block per RVE; a host batch goes to the device
+    and back once per pass of the loop below, i.e. once per call unless a list
+    overflows): the same physics, agreeing at round-off (cuda_kernel's docstring).
 
     `batch` may also be a device_batch.DeviceBatch, whose state stays on the GPU (device
     is then "cuda" whatever is passed): only the step counts, controls and per-RVE
