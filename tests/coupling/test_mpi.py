@@ -12,7 +12,6 @@ import shutil
 import subprocess
 import sys
 import textwrap
-import time
 import tomllib
 from pathlib import Path
 
@@ -247,13 +246,11 @@ def test_failing_rank_ends_the_job(kind, code, rve_case, serial, tmp_path):
     out = tmp_path / "out"
     args = [kind, "run", str(rve_case), "--out", str(out), "--quiet", "--checkpoint-every",
             "3"]
-    t = time.monotonic()
-    r = mpirun(2, args, timeout=120, script=script)
+    r = mpirun(2, args, timeout=120, script=script)  # a hang is a TimeoutExpired error
     assert r.returncode != 0
     if code is not None:
         assert r.returncode == code
     assert "injected failure of rank 1" in r.stderr
-    assert time.monotonic() - t < 60  # seconds (a start-up with warm numba caches is ~3 s)
     assert main(["run", str(rve_case), "--out", str(out), "--quiet", "--resume"]) == 0
     assert (out / "history.csv").read_text() == serial
 
