@@ -12,9 +12,9 @@ from grainscale.mpm.shape import LINEAR
 from grainscale.mpm.step import g2p, grid_velocity, p2g, rigid_velocity, shape_functions, step
 
 
-def _random_state(kind="GIMP"):
+def _random_state(kind="GIMP", y=(0.0, 0.5)):
     grid = Grid.make([0.0, 0.0, 0.0], 0.1, [6, 5, 4])
-    s = elastic_box(grid, [0.05, 0.0, 0.1], [0.55, 0.5, 0.3], n=2, shape=kind)
+    s = elastic_box(grid, [0.05, y[0], 0.1], [0.55, y[1], 0.3], n=2, shape=kind)
     rng = np.random.default_rng(3)
     s.points.v[:] = rng.normal(size=s.points.v.shape)
     s.points.m *= 1.0 + rng.random(s.points.n)  # unequal masses
@@ -37,15 +37,24 @@ def test_p2g_conserves_mass_and_momentum():
 def test_g2p_conserves_momentum_without_forces(update, flip):
     """With no force and no BC, PIC, FLIP and APIC leave sum m_p v_p unchanged by a step
     (APIC's affine term adds sum_p S_Ip m_p C_p (x_I - x_p), which sums to zero over I
-    by linear completeness; exact but for rounding)."""
-    for _ in range(2):  # APIC's second step starts from non-zero C
-        s = _random_state()
-        s.velocity_update, s.flip = update, flip
+    by linear completeness), but for the momentum of the nodes lighter than
+    MASS_TOL x the heaviest point, which carry no velocity (grid_velocity): the change
+    is bounded by that dropped momentum plus rounding. With GIMP and APIC's non-zero C
+    it is ~1e-11 of the total here, with C = 0 or linear shapes ~1e-15. The body keeps
+    clear of the grid's faces, where a GIMP support would reach nodes that do not exist
+    (a boundary, which this test excludes: 1e-10 there)."""
+    s = _random_state(y=(0.05, 0.45))
+    s.velocity_update, s.flip = update, flip
+    for k in range(2):  # the same state stepped twice: APIC's second step has C != 0
+        if k == 1 and update == "apic":
+            assert np.abs(s.points.C).max() > 0.1  # [1/s], from v ~ N(0, 1) m/s
         before = s.points.m @ s.points.v
         step(s, 1e-5)
         after = s.points.m @ s.points.v
         # stress from one tiny step is nonzero, but internal forces sum to zero
-        np.testing.assert_allclose(after, before, rtol=0, atol=1e-10 * np.abs(before).max())
+        dropped = np.abs(s.momentum[~s.active]).sum(axis=0)
+        assert np.all(np.abs(after - before) <= dropped + 1e-13 * np.abs(before).max()), (
+            after - before, dropped)
 
 
 def test_pic_transfer_reproduces_uniform_velocity():
