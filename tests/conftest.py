@@ -1,4 +1,5 @@
-"""Test-run setup: a numba cache that cannot serve stale kernels.
+"""Test-run setup: a numba cache that cannot serve stale kernels, and packings generated
+once per source tree.
 
 numba's on-disk cache checks only the source file of the function it compiled; a kernel
 whose callee in another file was edited is served from the cache as it was
@@ -7,6 +8,10 @@ hash of every source file of the installed (or editable) grainscale package: any
 starts from a cold cache, and an unchanged tree reuses its compiled kernels. Set before
 numba is imported, and inherited by the runs the tests start in subprocesses (mpiexec,
 the CLI, the CUDA simulator).
+
+The packings the runs generate from [rve] recipes go to one store per source tree
+(GRAINSCALE_PACKING_STORE, coupling/materials.py), so each recipe is generated once, not
+once per run folder; a source change starts a new store, as it may change generation.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ def _source_hash() -> str:
     return h.hexdigest()[:16]
 
 
-if "NUMBA_CACHE_DIR" not in os.environ:  # an explicit choice wins
-    os.environ["NUMBA_CACHE_DIR"] = str(
-        Path(tempfile.gettempdir()) / "grainscale-numba-cache" / _source_hash())
+_HASH = _source_hash()
+_TMP = Path(tempfile.gettempdir())
+os.environ.setdefault("NUMBA_CACHE_DIR", str(_TMP / "grainscale-numba-cache" / _HASH))
+os.environ.setdefault("GRAINSCALE_PACKING_STORE", str(_TMP / "grainscale-test-packings" / _HASH))

@@ -11,6 +11,10 @@ resumed or repeated run does not generate them again. A geostatic library
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -25,20 +29,51 @@ from grainscale.dem.state import RVEBatch
 from grainscale.io.packing import load_packing
 from grainscale.io.rve_h5 import read_rve_state, write_rve_state
 
+STORE_ENV = "GRAINSCALE_PACKING_STORE"  # a folder of packings shared between runs
+
+
+def _store_file(key: dict) -> Path | None:
+    """The file of recipe `key` in the folder $GRAINSCALE_PACKING_STORE (unset: None)."""
+    folder = os.environ.get(STORE_ENV)
+    if not folder:
+        return None
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:24]
+    return Path(folder) / f"packing_{digest}.h5"
+
+
+def _copy_atomic(src: Path, dst: Path) -> None:
+    """dst <- src by a uniquely named temporary and a rename: concurrent processes (MPI
+    ranks) writing the same file each leave a complete one."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dst.with_name(f"{dst.name}.{os.getpid()}.tmp")
+    shutil.copyfile(src, tmp)
+    os.replace(tmp, dst)
+
 
 def cached_packing(params: RVEParams, k: int, cache: Path, progress: bool) -> RVEBatch:
     """Packing k of the [rve] recipe (seed params.seed + k), read from `cache` if it holds
-    that recipe's packing, else generated and written there."""
+    that recipe's packing, else generated and written there. With the environment
+    variable GRAINSCALE_PACKING_STORE naming a folder, a packing of the same recipe
+    found there is copied instead of generated, and a generated one is added to it
+    (parameter studies and the test suite generate each recipe once)."""
     p = params.model_copy(update={"seed": params.seed + k})
     key = p.model_dump(mode="json")
     if cache.is_file():
         batch, stored = read_rve_state(cache)
         if stored == key:
             return batch
+    store = _store_file(key)
+    if store is not None and store.is_file():
+        batch, stored = read_rve_state(store)
+        if stored == key:
+            _copy_atomic(store, cache)
+            return batch
     say = (lambda text: print(f"  packing {k}: {text}", file=sys.stderr)) if progress else None
     batch = generate(p, progress=say)
     cache.parent.mkdir(parents=True, exist_ok=True)
     write_rve_state(cache, batch, key)
+    if store is not None:
+        _copy_atomic(cache, store)
     return batch
 
 
