@@ -33,6 +33,9 @@ def _source_hash() -> str:
     return h.hexdigest()[:16]
 
 
+# at least two numba threads, also on a one-core machine, so that the tests of thread
+# independence compare one thread with two
+os.environ.setdefault("NUMBA_NUM_THREADS", str(max(2, os.cpu_count() or 1)))
 _HASH = _source_hash()
 _TMP = Path(tempfile.gettempdir())
 os.environ.setdefault("NUMBA_CACHE_DIR", str(_TMP / "grainscale-numba-cache" / _HASH))
