@@ -54,7 +54,7 @@ def test_multiscale_confinement_and_path(runs):
     lateral = ms["p"] - ms["q"] / 3.0
     assert abs(lateral - 100e3).max() < 0.05 * 100e3
     assert abs(lateral.mean() - 100e3) < 0.01 * 100e3
-    # medium-dense response: contraction, then dilation; q/p rises to a peak near 1
+    # medium-dense response: contraction, then dilation (the peak q/p is the pure DEM's
+    # within 3 %: the test above)
     assert ms["volumetric_strain"].min() < -5e-4
     assert ms["volumetric_strain"][-1] > 0.0
-    assert 0.8 < ms["q_over_p"].max() < 1.3
