@@ -60,6 +60,7 @@ def test_student_t_band():
     assert math.isnan(fa.summary(np.array([20.0]))[1])
 
 
+@pytest.mark.validation
 def test_realisations_end_to_end(tmp_path):
     """Two generated 120-sphere packings, two axes: a steady angle that a frictional sphere
     packing can have (mu = 0.5 spheres without rolling resistance settle near 20-25 deg;

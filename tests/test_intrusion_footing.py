@@ -21,6 +21,7 @@ def test_prandtl_factor_and_davis_angle():
     assert footing.davis_angle(25.0, 25.0) == pytest.approx(25.0, rel=1e-12)
 
 
+@pytest.mark.validation
 def test_strip_footing_converges_into_the_radenkovic_bounds():
     """phi = 20 deg (the intrusion RVE's angle), one point a cell, 8 and 16 cells over the
     footing's width, to a settlement of 0.06 B (the plateau starts near 0.03 B). A
@@ -39,6 +40,7 @@ def test_strip_footing_converges_into_the_radenkovic_bounds():
     assert lower <= n16["N_q_plateau"] <= 1.10 * upper
 
 
+@pytest.mark.validation
 def test_footing_goes_on_where_a_light_node_threw_a_point_out():
     """16 cells over B, one point a cell, to 0.25 B. Without the light-node rule
     (mpm/step.py, affine_velocity) a node holding a sliver of a point's mass beside the

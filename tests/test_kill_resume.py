@@ -232,6 +232,7 @@ def test_kill_spec_is_checked():
     faults.point("step.begin")  # unarmed: nothing happens
 
 
+@pytest.mark.validation
 def test_resume_after_sigkill_at_every_point(block, server, tmp_path):
     """26 kills over a serial run of 60 steps: every point of the step loop and of the
     checkpoint write, the fallback to checkpoint.prev.h5 (and kills while resuming from
@@ -246,6 +247,7 @@ def test_resume_after_sigkill_at_every_point(block, server, tmp_path):
     assert_same_outputs(out, ref)
 
 
+@pytest.mark.validation
 def test_resume_after_sigkill_under_mpi(block, tmp_path):
     """The same on 2 ranks (one rank killed alone, or both at the same point), with
     rebalancing: the serial run's outputs."""
@@ -257,6 +259,7 @@ def test_resume_after_sigkill_under_mpi(block, tmp_path):
     assert_same_outputs(out, ref)
 
 
+@pytest.mark.validation
 def test_resume_after_sigkill_multiscale(server, tmp_path):
     """RVE states with their contact histories in the parts."""
     case = small_unit_element(tmp_path, end=0.012, interval=0.0004)

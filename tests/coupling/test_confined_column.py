@@ -14,6 +14,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+import pytest
 import tomli_w
 
 from grainscale.analysis import read_columns
@@ -44,6 +45,7 @@ def fifths(ke: np.ndarray) -> tuple[float, float]:
     return float(ke[:k].max()), float(ke[-k:].max())
 
 
+@pytest.mark.validation
 def test_undamped_column_does_not_gain_energy(tmp_path):
     """Dynamic RVEs (real time, 20-30 DEM steps per MPM step), no damping anywhere, run
     to 0.1 s (~30 periods of the fundamental mode, 0.2 s with the lag made it x1,000).
@@ -74,6 +76,7 @@ def test_damped_quasi_static_column_never_exceeds_its_initial_energy(tmp_path):
     assert last < 1e-2 * first, (first, last)
 
 
+@pytest.mark.validation
 def test_quasi_static_column_with_one_step_increments_releases_only_its_prestress(tmp_path):
     """min_substeps 1 (the default: most of an intrusion bed takes one DEM step per MPM
     step), damping 0.2. The packing starts out of equilibrium with the column: its shear

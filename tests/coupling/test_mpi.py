@@ -116,6 +116,7 @@ def small_column(tmp: Path) -> Path:
     return path
 
 
+@pytest.mark.validation
 def test_column_features_are_rank_and_thread_independent(tmp_path):
     """The reduced column (small_column) gives one history.csv, to the byte, on 1 rank
     with 1 and 2 threads, on 2 ranks, and on 3 ranks stopped and resumed on 2 (with
@@ -189,6 +190,7 @@ def test_ranks_give_identical_history_with_tractions(tmp_path):
         assert (tmp_path / f"n{n}" / "history.csv").read_text() == ref
 
 
+@pytest.mark.validation
 def test_restart_under_mpi_on_any_rank_count(rve_case, serial, tmp_path):
     out = tmp_path / "part"
     common = ["run", str(rve_case), "--out", str(out), "--quiet", "--checkpoint-every", "4"]
@@ -237,6 +239,7 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+@pytest.mark.validation
 @pytest.mark.parametrize("kind,code", [("bug", None), ("simulation", 1)])
 def test_failing_rank_ends_the_job(kind, code, rve_case, serial, tmp_path):
     """An unexpected exception on one rank aborts the job; a simulation error stops all
@@ -255,6 +258,7 @@ def test_failing_rank_ends_the_job(kind, code, rve_case, serial, tmp_path):
     assert (out / "history.csv").read_text() == serial
 
 
+@pytest.mark.validation
 def test_fresh_compilation_and_cached_kernels_agree(tmp_path):
     """A run compiled from scratch and a run from numba's cache give the same bits.
 
@@ -283,6 +287,7 @@ def test_srun_tasks_that_mpi_does_not_join_are_refused(tmp_path, monkeypatch, ca
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.validation
 def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp_path):
     """Cells doubled during the run (dem/retile.py) on some points only: RVEs of two
     sizes, split over ranks, checkpointed padded to one size and resumed on another rank

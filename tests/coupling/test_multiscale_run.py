@@ -52,6 +52,7 @@ def test_resume_continues_bitwise(case_file, tmp_path):
     assert len(a.splitlines()) > 15
 
 
+@pytest.mark.validation
 def test_resume_after_sigkill(case_file, tmp_path):
     ref = tmp_path / "ref"
     assert main(["run", str(case_file), "--out", str(ref), "--quiet",

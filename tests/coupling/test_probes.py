@@ -218,6 +218,7 @@ def test_resume_continues_the_probe_series(probe_case, full, tmp_path):
         assert (out / f).read_bytes() == (full / f.replace("late", "corner")).read_bytes()
 
 
+@pytest.mark.validation
 @pytest.mark.skipif(MPIEXEC is None, reason="no mpiexec (install the mpich wheel)")
 def test_probes_under_mpi_with_rebalancing(probe_case, full, tmp_path):
     """3 ranks, points changing owner every 3 steps: the rank that holds a probe's point

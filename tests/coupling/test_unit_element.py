@@ -20,6 +20,8 @@ from grainscale.config.case import load_rve_case
 from grainscale.dem.element_tests import triaxial_ensemble
 from grainscale.dem.generate import generate
 
+pytestmark = pytest.mark.validation  # minutes: the validation tier
+
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):

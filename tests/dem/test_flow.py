@@ -62,6 +62,7 @@ def test_fit_weights_and_bounds():
         flow.fit_mu_i([0.1, 0.2, 0.2], [0.4, 0.5, 0.5])
 
 
+@pytest.mark.validation
 def test_fit_standard_errors_match_the_scatter_of_repeated_fits():
     """An independent check of the linearised errors: 300 noisy realisations (sigma 0.01
     at 8 rates spanning the knee) fitted one by one; the rms of the reported standard

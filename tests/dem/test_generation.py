@@ -97,7 +97,7 @@ def test_unreachable_porosity_is_reported():
         generate(params)
 
 
-@pytest.mark.slow
+@pytest.mark.validation
 def test_unit_element_packing_800():
     """Seed section 4.1 RVE: N = 800, r 3-7 mm, E = 100 MPa, kt/kn = 0.8, mu = 0.5,
     porosity 0.373, p = 100 kPa; deterministic."""
@@ -109,7 +109,7 @@ def test_unit_element_packing_800():
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
 
 
-@pytest.mark.slow
+@pytest.mark.validation
 def test_column_collapse_packing_800():
     """Seed section 4.2 RVE: N = 800, density 2500, r 1.8-4.2 mm, E = 600 MPa,
     kt/kn = 0.5, mu = 0.384, porosity 0.401, p = 1 kPa."""

@@ -131,7 +131,7 @@ def test_triaxial_small_against_yade():
     assert abs(ev[-1] - ref_dilation) < 0.02, (ev[-1], ref_dilation)
 
 
-@pytest.mark.slow
+@pytest.mark.validation
 def test_triaxial_unit_element_800():
     """Seed section 4.1 RVE (800 spheres, the stored packing of tests/data/triaxial_800)
     to 30 % axial strain at 0.25 /s (I ~ 4e-4), against the same test in YADE 2023.02a

@@ -23,6 +23,7 @@ def _run(tmp_path, name, **channel):
     return row
 
 
+@pytest.mark.validation
 def test_channel_walls(tmp_path):
     """A channel 40 mm wide (two cells on each side of the symmetry plane):
     - frictionless walls: the flow is planar, so the front is the slice's; measured

@@ -10,6 +10,8 @@ import tomli_w
 from example_scripts import load_example
 from grainscale.cli import main
 
+pytestmark = pytest.mark.validation  # minutes: the validation tier
+
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"
 
 

@@ -100,6 +100,7 @@ def _surface_speed(s, t_end):
     return float(s.points.v[:, 0].max())
 
 
+@pytest.mark.validation
 def test_a_layer_thinner_than_h_stop_stays_a_thicker_one_flows():
     """The stopping height of a rough incline, h_stop = pi A d / (2 sqrt(tan a - mu_s)):
     at 0.75 h_stop the layer only creeps at the seed's rate, at 1.3 h_stop it flows.

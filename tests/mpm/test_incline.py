@@ -47,6 +47,7 @@ def _bagnold(angle_deg, H, z):
         H**1.5 - (H - z) ** 1.5)
 
 
+@pytest.mark.validation
 def test_layer_reaches_the_bagnold_profile():
     """25 deg (tan = 0.466 between mu_s = 0.382 and mu_2 = 0.643: I = 0.133), H = 10 mm
     = 19 d, from rest to 2 s: the surface velocity approaches 0.38 m/s exponentially;

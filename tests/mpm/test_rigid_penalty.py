@@ -202,6 +202,7 @@ def test_rigid_contact_keys_are_checked(extra, words):
         assert w in str(err.value), (w, str(err.value))
 
 
+@pytest.mark.validation
 def test_penalty_reaction_has_no_grid_ripple():
     """examples/intrusion/ripple.py's elastic strip punch (plane strain, 0.05 m cells)
     pushed 0.12 m (2.4 cells) into the bed: with the penalty contact the reaction departs
@@ -216,6 +217,7 @@ def test_penalty_reaction_has_no_grid_ripple():
     assert r["nodes"]["max_percent"] > 2.0 * r["penalty"]["max_percent"], r
 
 
+@pytest.mark.validation
 def test_flat_punch_on_elastic_half_space_gives_boussinesq_stiffness():
     """examples/intrusion/flat_punch.py: a frictionless rigid circular punch (quarter
     model, penalty contact) on an elastic cube of side 6 a and 9 a. With the contact

@@ -37,6 +37,7 @@ def _bar_energy(update, flip, cfl, periods, **kw):
     return energy() / e0
 
 
+@pytest.mark.validation
 def test_apic_keeps_the_energy_of_a_vibrating_bar_over_100_periods():
     """APIC: measured within 0.1 % after 100 periods (24,000 steps) at cfl 0.5 and 0.25
     alike; 0.5 % leaves room for rounding in the integrator, while any per-step
@@ -44,6 +45,7 @@ def test_apic_keeps_the_energy_of_a_vibrating_bar_over_100_periods():
     assert abs(_bar_energy("apic", 1.0, 0.5, 100) - 1.0) < 5e-3
 
 
+@pytest.mark.validation
 def test_flip_blend_dissipation_depends_on_the_time_step():
     """The reason APIC is the default: a 2 % PIC share (flip = 0.98) acts once per step,
     so halving dt doubles its loss over the same time (measured 2.4 % and 4.8 % after 10
@@ -63,6 +65,7 @@ def test_aflip_keeps_the_energy_of_a_vibrating_bar(cfl):
     assert abs(_bar_energy("aflip", 1.0, cfl, 10) - 1.0) < 2e-3
 
 
+@pytest.mark.validation
 def test_relaxed_aflip_keeps_the_energy_of_a_vibrating_bar_over_100_periods():
     """AFLIP with velocity_relaxation_time = 0.01 s (a twelfth of the bar's period): the
     first mode lies in the grid's field, so the relaxation has nothing to remove;
