@@ -396,3 +396,45 @@ def test_dynamic_rve_damping_is_refused_without_opt_in(tmp_path):
     p.write_text(RVE_DAMPING_CASE.format(material="", rve="damping = 0.2"))
     with pytest.raises(ConfigError, match=r"rve.damping = 0.2 .*materials.sand.allow_rve_damping"):
         load_case(p)
+
+
+def test_a_retile_width_below_the_recipes_limit_is_refused_before_generating(
+        tmp_path, monkeypatch):
+    """The same check from the [rve] recipe's radii, before any packing is generated
+    (coupling/materials.prepare): generation is never reached; a width above the
+    recipe's bound passes it (the exact check after generation still applies)."""
+    from grainscale.config.base import ConfigError
+    from grainscale.config.rve import RVEParams
+    from grainscale.coupling import materials
+
+    rve = RVEParams(particles=150)  # radii 3-7 mm
+    materials.check_retile_width_of_recipe("sand", 4.0, rve)
+    materials.check_retile_width_of_recipe("sand", 0.0, rve)  # off
+    with pytest.raises(ConfigError, match=r"materials\.sand\.retile_width = 2\.5: must "
+                                          r"exceed 2\.\d+ mean grain diameters"):
+        materials.check_retile_width_of_recipe("sand", 2.5, rve)
+    case = tmp_path / "case.toml"
+    case.write_text("""
+[grid]
+cell_size = 0.1
+cells = [2, 2, 2]
+[time]
+end = 0.01
+[materials.sand]
+type = "dem"
+retile_width = 2.5
+[[bodies]]
+shape = "box"
+material = "sand"
+lo = [0.0, 0.0, 0.0]
+hi = [0.1, 0.1, 0.1]
+[rve]
+particles = 150
+""")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("generated a packing before refusing the case")
+
+    monkeypatch.setattr(materials, "generate", refuse)
+    from grainscale.cli import main
+    assert main(["run", str(case), "--out", str(tmp_path / "out"), "--quiet"]) == 2

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import sys
@@ -142,10 +143,30 @@ def check_retile_width(name: str, width: float, library: list[RVEBatch], skin: f
                           "retile)")
 
 
+def check_retile_width_of_recipe(name: str, width: float, rve: RVEParams) -> None:
+    """check_retile_width before generating: with radii drawn uniformly in [r_min, r_max],
+    the packing's mean radius exceeds (r_min + r_max)/2 + 3 sigma, sigma = (r_max - r_min)
+    / sqrt(12 N), with probability ~1e-3, so a width below the bound of that mean is
+    refused without generating anything; the exact check follows generation."""
+    if width <= 0:
+        return
+    rmin, rmax = rve.radius_min, rve.radius_max
+    mean_hi = 0.5 * (rmin + rmax) + 3.0 * (rmax - rmin) / math.sqrt(12.0 * rve.particles)
+    least = (2 * rmax + contact_params(rve).skin) / mean_hi
+    if width <= least:
+        raise ConfigError(f"materials.{name}.retile_width = {width}: must exceed {least:.3g} "
+                          "mean grain diameters for the [rve] recipe's radii (the narrowest "
+                          "cell the neighbour search accepts, 2 (2 r_max + skin)), or be 0 "
+                          "(never retile)")
+
+
 def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
     """Packings of every "dem" material; sets their bulk density in the case and
     returns the `material_factory` for `mpm.setup.build_state` (None if none)."""
     libraries = {}
+    for name, cfg in case.materials.items():  # what can be checked before generating
+        if cfg.type == "dem" and not cfg.packings:
+            check_retile_width_of_recipe(name, cfg.retile_width, case.rve)
     for name, cfg in case.materials.items():
         if cfg.type != "dem":
             continue
