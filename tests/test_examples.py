@@ -43,3 +43,19 @@ def test_column_example_history_columns(tmp_path):
     first = [float(v) for v in rows[1].split(",")]
     assert first[3] == pytest.approx(0.0, abs=1e-12)  # runout measured from the column edge
     assert first[4] == pytest.approx(1.0, abs=1e-12)
+
+
+def test_column_plot_script_plots_a_run(tmp_path):
+    """examples/column_collapse/plot.py on a run's output: the PNG is written and reads
+    back as an image (its curve is the run's history.csv, its lines the published
+    runouts)."""
+    import matplotlib.image
+
+    from example_scripts import load_example
+
+    out = tmp_path / "col"
+    assert main(["run", str(EXAMPLES / "column_collapse" / "mohr_coulomb.toml"), "--out",
+                 str(out), "--max-steps", "3", "--quiet"]) == 0
+    png = load_example("column_collapse/plot.py").plot(out, tmp_path / "runout.png")
+    image = matplotlib.image.imread(png)
+    assert image.shape[0] > 100 and image.shape[1] > 100
