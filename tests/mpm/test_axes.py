@@ -71,7 +71,8 @@ def test_a_rotated_shifted_frame_gives_the_same_collapse(tmp_path):
     stage and release (9 ms, ~150 steps), the runout, height and kinetic energy of
     every row agree within 1e-9 of their largest value (measured: 5e-13). A key
     read along the wrong axis (a flow_axis ignored, the per-axis cell sizes applied in
-    the wrong order, the wall's offset dropped) changes them at order 1."""
+    the wrong order, the wall's offset dropped: the runout off by 0.3) changes them at
+    order 1."""
     a, b = _cases(tmp_path)
     ha, hb = {}, {}
     for path, h in ((a, ha), (b, hb)):
