@@ -20,7 +20,9 @@ def independent_state(b, params):
     porosity = 1.0 - (4.0 / 3.0) * np.pi * np.sum(b.radius[0] ** 3) / abs(np.linalg.det(b.h[0]))
     c = b.copy()
     engine.refresh(c, contact_params(params))
-    i, j, d, fn, ft = contact_list(c, params.young_modulus)
+    # the tangential history projected on the contact plane and capped at mu f_n, as the
+    # kernel's evaluation does (a sliding contact's stored force may exceed the cap)
+    i, j, d, fn, ft = contact_list(c, params.young_modulus, friction=params.friction)
     n = d / np.linalg.norm(d, axis=1)[:, None]
     f_on_i = ft - fn[:, None] * n
     # Love-Weber plus the kinetic stress of the residual grain velocities
