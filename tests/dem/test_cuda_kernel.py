@@ -186,9 +186,9 @@ def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
 @pytest.mark.validation
 def test_resident_run_retiles_writes_probes_and_resumes_bitwise(sim_coupled):
     """`grainscale run --device cuda` of the shrunk column with every cell doubled at its
-    first update, a probe RVE and a checkpoint every 2 steps: stopped after 4 steps and
-    resumed, it writes the uninterrupted run's history and probe frames to the byte,
-    and its history is the CPU's within RUN_RTOL (below)."""
+    first update, a probe RVE and a checkpoint every 2 steps, its geostatic stage (7
+    steps): stopped after 3 and resumed, it writes the uninterrupted run's history and
+    probe frames to the byte, and its history is the CPU's within RUN_RTOL (below)."""
     res = sim_coupled["coupled"]["retiled"]
     assert res["rows"] >= 4 and res["probe_files"] > 0
     assert res["particles"] == 180  # every 90-sphere cell was doubled on the device path
