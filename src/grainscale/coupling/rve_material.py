@@ -276,14 +276,14 @@ class RVEMaterial:
         if self.retile_width <= 0:
             return
         if self.device == "cuda":  # the cells are current on the host, the rest is not
-            if not any(self._thin(b).any() for b in self.groups):
+            if not any(self._thin(b, retile.widths(b.h)).any() for b in self.groups):
                 return
             self._sync()
         pieces: dict[int, list[tuple[RVEBatch, np.ndarray]]] = {}  # by sphere count
         for batch, rows in zip(self.groups, self.rows, strict=True):
             n = batch.n_particles
             w = retile.widths(batch.h)
-            thin = self._thin(batch)
+            thin = self._thin(batch, w)
             if 2 * n > self.max_particles or not thin.any():
                 pieces.setdefault(n, []).append((batch, rows))
                 continue
@@ -301,10 +301,10 @@ class RVEMaterial:
                 self.rows.append(np.concatenate([r for _, r in parts]))
         self._forget_devices()
 
-    def _thin(self, batch: RVEBatch) -> np.ndarray:
-        """(R,) cells of a group narrower than retile_width mean grain diameters."""
-        w = retile.widths(batch.h).min(axis=1)
-        return w < self.retile_width * 2.0 * batch.radius.mean(axis=1)
+    def _thin(self, batch: RVEBatch, widths: np.ndarray) -> np.ndarray:
+        """(R,) cells of a group narrower than retile_width mean grain diameters, from
+        their perpendicular widths (R,3) (retile.widths)."""
+        return widths.min(axis=1) < self.retile_width * 2.0 * batch.radius.mean(axis=1)
 
     def initial_stress(self) -> np.ndarray:
         """(P,3,3) sym(sigma) of the prepared RVEs' Love-Weber stress [Pa] (see update)."""
