@@ -27,9 +27,9 @@ def test_strip_footing_converges_into_the_radenkovic_bounds():
     footing's width, to a settlement of 0.06 B (the plateau starts near 0.03 B). A
     non-associated (psi = 0) material's limit load lies between the associated ones at
     Davis's angle and at phi: N_q in [5.73, 6.40]. The coarse grids are too strong and
-    converge from above (measured to 0.1 B: 7.06, 6.66, 6.13 on 8, 16, 32 cells), so the
+    converge from above (measured to 0.1 B: 7.07, 6.64, 6.30 on 8, 16, 32 cells), so the
     finer of the two must lie below the coarser and within 10 % above the upper bound:
-    the 16-cell value's own grid error, its distance to the 32-cell one, is 8.7 %. A
+    the 16-cell value's own grid error, its distance to the 32-cell one, is 5.4 %. A
     Drucker-Prager cone circumscribing Mohr-Coulomb, a dilating return or a wrong angle
     would each leave it well outside."""
     n8 = footing.footing(20.0, 8, 0.06, points_per_cell=1)

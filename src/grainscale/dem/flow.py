@@ -22,9 +22,8 @@ The fitted `[materials.X]` table is the shear-cell fit. The `mu_i` material
 shear its only deviator is s_xz: it carries tau_xz / sigma_n = sqrt(s:s/2) / p. The
 grains carry normal-stress differences as well (sqrt(s:s/2)/p is 10-30 % above
 tau/sigma_n, docs/validation.md §2.2), which resist no shearing on the shear plane; a
-continuum given the invariant measure is that much too strong on its shear planes (the
-column collapse: runout 0.556 against the multiscale run's 0.631; with the shear-cell
-measure 0.633).
+continuum given the invariant measure is that much too strong on its shear planes
+(docs/validation.md §2.3, "Which friction the continuum takes").
 
 Steady values are means over shear strain >= `steady_from`; their 95 % confidence band
 is a batch-means estimate (the window split into BLOCKS consecutive blocks, Student t
