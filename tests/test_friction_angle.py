@@ -1,8 +1,10 @@
 """examples/intrusion/friction_angle.py: the mobilised angle of a known stress state along
-each axis, its Student-t band, and a run over generated packings of a tiny RVE."""
+each axis, its Student-t band, and a run over generated packings of the quick
+intrusion's RVE against the recipe's measured angle."""
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,30 +12,6 @@ import pytest
 from example_scripts import load_example
 
 fa = load_example("intrusion/friction_angle.py")
-
-CASE = """
-[rve]
-particles = 120
-radius_min = 4e-3
-radius_max = 5e-3
-density = 2650.0
-young_modulus = 100e6
-stiffness_ratio = 0.8
-friction = 0.5
-damping = 0.2
-seed = 3
-
-[rve.preparation]
-pressure = 10e3
-porosity = 0.40
-porosity_tolerance = 0.03
-
-[triaxial]
-confining_pressure = 10e3
-axial_strain = 0.15
-strain_rate = 0.5
-output_interval = 0.005
-"""
 
 
 @pytest.mark.parametrize("axis", ["x", "y", "z"])
@@ -60,25 +38,32 @@ def test_student_t_band():
     assert math.isnan(fa.summary(np.array([20.0]))[1])
 
 
+QUICK = Path(__file__).resolve().parents[1] / "examples" / "intrusion" / "quick.toml"
+
+
 @pytest.mark.validation
-def test_realisations_end_to_end(tmp_path):
-    """Two generated 120-sphere packings, two axes: a steady angle that a frictional sphere
-    packing can have (mu = 0.5 spheres without rolling resistance settle near 20-25 deg;
-    a 120-sphere cell is noisy, so the bounds are wide), per axis and packing, and the
-    cache reused on a second call."""
-    case = tmp_path / "case.toml"
-    case.write_text(CASE)
+def test_two_packings_agree_with_the_recipes_sixteen(tmp_path):
+    """Two generated packings of the quick intrusion's RVE (150 spheres, mu = 0.5, its
+    [triaxial] table: 10 kPa, 0.1 /s to 30 %), each along x, y and z: the steady angle
+    must lie within 1.5 deg of the recipe's 20.07 deg measured on 16 packings x 3 axes
+    (docs/validation.md §3). Tolerance: the 16 give a 95 % band of +-0.25 deg, a
+    standard deviation of 0.47 deg between packing means; the mean of two packings
+    scatters by 0.33 deg, so 1.5 deg is 4.5 of those (measured: 19.43 deg). Mutation
+    tried: the Coulomb limit at half the grain friction (cap = 0.5 mu f_n in
+    dem/kernel.py) gives 18.1 deg and fails; the angle of spheres depends weakly on
+    their friction, so this is about the smallest change in the grains' law the check
+    can see. Then the packings are reused from the cache (unchanged files) and one axis
+    alone, its own batch, repeats its angle bitwise."""
     out = tmp_path / "phi.json"
-    assert fa.main([str(case), "--realisations", "2", "--axes", "x", "z", "--from", "0.08",
-                    "--out", str(out)]) == 0
+    assert fa.main([str(QUICK), "--realisations", "2", "--out", str(out)]) == 0
     r = json.loads(out.read_text())
-    assert 10.0 < r["phi_deg"] < 35.0
+    assert abs(r["phi_deg"] - 20.07) < 1.5, r
     assert r["peak_phi_deg"] >= r["phi_deg"]
-    assert set(r["phi_per_axis_deg"]) == {"x", "z"} and len(r["phi_per_packing_deg"]) == 2
+    assert set(r["phi_per_axis_deg"]) == {"x", "y", "z"} and len(r["phi_per_packing_deg"]) == 2
     assert r["packings"] == ["packing_0.h5", "packing_1.h5"]
     stamp = [p.stat().st_mtime_ns for p in sorted((tmp_path / "phi_packings").glob("*.h5"))]
-    assert fa.main([str(case), "--realisations", "2", "--axes", "x", "z", "--from", "0.08",
+    assert fa.main([str(QUICK), "--realisations", "2", "--axes", "z",
                     "--out", str(out)]) == 0
     assert [p.stat().st_mtime_ns for p in sorted((tmp_path / "phi_packings").glob("*.h5"))] \
         == stamp
-    assert json.loads(out.read_text()) == r  # same packings, same batch: same angles
+    assert json.loads(out.read_text())["phi_per_axis_deg"]["z"] == r["phi_per_axis_deg"]["z"]

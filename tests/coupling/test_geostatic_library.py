@@ -69,7 +69,9 @@ def test_each_point_starts_at_its_levels_stress(tmp_path):
     initial mean stress is its level's within 1 %: generate.consolidate stops only with
     every stress component within tol = 1 % of its target, and the material's initial
     stress is that state's own (engine.refresh, the end-of-increment evaluation). A
-    point given the other level's packing is off by a factor of 10."""
+    point given the other level's packing is off by a factor of 10. Mutation tried:
+    depth measured up from the lowest point (materials.geostatic_assignment) gives the
+    top point the 100 kPa packing and fails."""
     case = _case(tmp_path, "geostatic_pressures = [10e3, 100e3]")
     out = tmp_path / "out"
     factory = prepare(case, tmp_path, out, progress=False)

@@ -46,7 +46,9 @@ def test_rve_alone_equals_rve_in_batch():
 
 def test_one_thread_equals_two_threads():
     """Same batch advanced with 1 and with 2 numba threads: bitwise identical. Two
-    threads exist on any machine (tests/conftest.py asks numba for at least two)."""
+    threads exist on any machine (tests/conftest.py asks numba for at least two).
+    Mutation tried: each lane's RVEs reporting into the lane's row (out[t] for out[r]
+    in kernel._advance_split) fails here (and in the batch test above)."""
     assert numba.config.NUMBA_NUM_THREADS >= 2
     rves, p, dt = _three()
     a = concatenate(rves)

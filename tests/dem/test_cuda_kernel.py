@@ -167,7 +167,7 @@ def test_momentum_is_conserved_in_a_fixed_periodic_cell(sim):
 
 @pytest.mark.parametrize("case", ["resident", "resident_overflow"])
 def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
-    """State kept on the device across four increments (device_batch.py) against the
+    """State kept on the device across two increments (device_batch.py) against the
     same calls copying the state down and up each time: the same kernel on the same
     data, so every array agrees bitwise; the second case starts with a capacity of 3,
     regrown through pull, grow, push. Only the small per-RVE results crossed each
