@@ -43,3 +43,19 @@ def test_no_noise_figures_without_an_ensemble():
     del dem["q_over_p_sem"], dem["volumetric_strain_sem"]
     m = unit_element_metrics(dem, ms)
     assert "within_twice_noise" not in m and "noise_q_over_p_over_dem_range" not in m
+
+
+@pytest.mark.parametrize(("v_offset", "verdict"), [(0.02, "pass"),
+                                                   (0.04, "within realisation noise"),
+                                                   (0.05, "fail")])
+def test_verdict_weighs_the_realisation_noise(v_offset, verdict):
+    """q/p off by 0.02 of its range (peak 2 % apart), eps_v by v_offset of its range,
+    with standard errors 0.02 of each range: chaos alone leaves 2 x 0.02 / sqrt(pi) =
+    2.26 % of each range between two means. 2 % passes the 3 % acceptance; 4 % fails it
+    but lies within twice the noise (4.5 %); 5 % lies outside both."""
+    dem, ms = _paths(0.02, 0.02)
+    dem["volumetric_strain_sem"] = np.full_like(dem["axial_strain"], 0.02 * 0.03)
+    ms["volumetric_strain"] = dem["volumetric_strain"] + v_offset * 0.03
+    m = unit_element_metrics(dem, ms)
+    assert m["mad_volumetric_strain_over_dem_range"] == pytest.approx(v_offset, rel=1e-9)
+    assert m["verdict"] == verdict

@@ -1,5 +1,6 @@
 """Case keys that no other test reads, each checked for its effect: `output.axial_axis`
-other than z, `output.column.front_quantile`, `shape = "file"` bodies."""
+other than z, `output.column.front_quantile`, `shape = "file"` bodies, a per-axis
+`grid.cell_size`."""
 
 from __future__ import annotations
 
@@ -124,3 +125,19 @@ def test_a_body_from_a_points_file(tmp_path):
     np.testing.assert_allclose(s.points.vol0, [1e-4, 2e-4, 1.5e-4], rtol=1e-15)
     np.testing.assert_allclose(s.points.m, 2000.0 * np.array([1e-4, 2e-4, 1.5e-4]),
                                rtol=1e-15)
+
+
+def test_cell_size_per_axis(tmp_path):
+    """grid.cell_size = [2.0, 3.0, 2.5]: the cube's single cell is 2 m along x, so the x+
+    nodes at -0.02 m/s give F_xx = exp(-0.01 t) as in a cubic 2 m cell; were the sizes
+    read in another order (hx = 2.5 or 3 m) the x+ face would sit at 2.5 or 3 m and the
+    strain rate be 0.008 or 0.0067 /s."""
+    case = tmp_path / "cube.toml"
+    case.write_text(CUBE.format(axis="x").replace("cell_size = 2.0",
+                                                  "cell_size = [2.0, 3.0, 2.5]"))
+    s = build_state(load_case(case), tmp_path)
+    np.testing.assert_array_equal(s.grid.cell_size, [2.0, 3.0, 2.5])
+    assert main(["run", str(case), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    h = read_columns(tmp_path / "o" / "history.csv")
+    np.testing.assert_allclose(h["axial_strain"], 1.0 - np.exp(-0.01 * h["time"]),
+                               rtol=1e-3, atol=1e-12)

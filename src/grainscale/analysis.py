@@ -2,7 +2,9 @@
 
 Acceptance (coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute
 deviation of q/p and of eps_v over the common axial-strain range at most 3 % of each
-curve's range.
+curve's range. Against a DEM ensemble the verdict also weighs the realisation noise:
+"pass" (the 3 % acceptance), "within realisation noise" (peak within 3 %, each mean
+deviation within twice what chaos alone leaves between two such means), or "fail".
 """
 
 from __future__ import annotations
@@ -66,4 +68,10 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
         out["within_twice_noise"] = bool(all(
             out[f"mad_{k}_over_dem_range"] <= 2.0 * out[f"noise_{k}_over_dem_range"]
             for k in ("q_over_p", "volumetric_strain")))
+        # the 3 % of the mean deviations presumes a reference far less noisy than that;
+        # where chaos alone puts two means several % apart, the deviations are judged
+        # against that noise instead (studies/demo_noise.py measures how far)
+        out["verdict"] = ("pass" if out["pass"] else "within realisation noise"
+                          if out["within_twice_noise"]
+                          and out["peak_relative_difference"] <= 0.03 else "fail")
     return out
