@@ -61,6 +61,9 @@ def measure_flow(case: Path, out: Path, tiles: int, pressures: list[float],
                            "--quiet"])
         if code:
             raise SystemExit(f"grainscale rve flow exited with {code}")
+        if not table.is_file():  # measured, but the points did not determine a law
+            raise SystemExit(f"no mu(I) fit in {out / 'flow.csv'}: see the message above "
+                             "(--inertial needs at least 3 rates)")
     return tomllib.loads(table.read_text())["materials"]["sand"]
 
 
