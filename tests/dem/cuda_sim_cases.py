@@ -34,6 +34,7 @@ from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_packi
 THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 # The coupled runs' RVE: the fewest spheres a cell of 8 r_max holds at porosity 0.38
+SHEAR_STEPS = np.array([30, 40])  # per RVE: both rebuild their lists on the way
 SMALL_RVE = {"particles": 90, "radius_min": 2.0e-3, "radius_max": 2.2e-3}
 
 
@@ -230,38 +231,30 @@ def resident_against_per_call(base: RVEBatch, p: engine.ContactParams, dt: float
 
 
 def main(parts: list[str]) -> None:
-    """parts: "kernel" (sections 1-7, tiny batches, seconds) and/or "coupled" (section 8,
-    the `grainscale run` cases, minutes on the simulator)."""
+    """parts: "kernel" (sections 1, 2 and 7: shear through rebuilds, capacity overflow,
+    the resident path; tiny batches, the fast tier), "kernel_more" (sections 3-6:
+    momentum, damping and idle threads, reverse-list overflow, spread radii) and/or
+    "coupled" (section 8, the `grainscale run` cases, minutes on the simulator)."""
     t0 = time.perf_counter()
-    if "kernel" not in parts:
-        res = {"coupled": coupled_runs(), "seconds": time.perf_counter() - t0}
-        print(json.dumps(res))
-        return
+    res: dict = {"available": cuda_kernel.is_available()}
+    if "kernel" in parts or "kernel_more" in parts:
+        kernel_cases(parts, res)
+    if "coupled" in parts:
+        res["coupled"] = coupled_runs()
+    res["seconds"] = time.perf_counter() - t0
+    print(json.dumps(res))
+
+
+def kernel_cases(parts: list[str], res: dict) -> None:
+    """Sections 1-7 (those of `parts`) into res."""
     block_size(THREADS)
     a, p, dt = agitated_dense_state(n=24, seed=3)
     b, _, _ = agitated_dense_state(n=24, seed=5)
     base = concatenate([a, b])
-    res: dict = {"available": cuda_kernel.is_available()}
-
-    # 1. shear with a normal-stress servo through list rebuilds, per-RVE step counts
     ctrl = engine.rate_control(2, l_ctrl=[[0.0, 400.0, 0.0], [0.0, 0.0, 0.0],
                                           [0.0, 0.0, -20.0]], servo={0: -50e3},
                                max_rate=50.0)
-    nsteps = np.array([30, 40])
-    cpu, gpu, again = base.copy(), base.copy(), base.copy()
-    engine.advance(cpu, nsteps, dt, p, ctrl)
-    engine.advance(gpu, nsteps, dt, p, ctrl, device="cuda")
-    engine.advance(again, nsteps, dt, p, ctrl, device="cuda")
-    res["shear"] = compare(cpu, gpu)
-    res["shear"]["rebuilt"] = [bool(not np.array_equal(base.h_ref[r], gpu.h_ref[r]))
-                               for r in range(2)]
-    res["shear"]["rebuilt_cpu"] = [bool(not np.array_equal(base.h_ref[r], cpu.h_ref[r]))
-                                   for r in range(2)]
-    res["shear"]["bitwise_rerun"] = all(
-        np.array_equal(getattr(gpu, f), getattr(again, f))
-        for f in ("s", "v", "w", "ft", "stress", "force", "torque", "nbr_j", "unbalanced"))
-
-    # 2. a list capacity too small for the next build: engine.advance regrows, retries
+    still = engine.rate_control(2)
     small = base.copy()
     k = 3
     small.nbr_j = np.ascontiguousarray(small.nbr_j[:, :, :k])
@@ -269,11 +262,44 @@ def main(parts: list[str]) -> None:
     small.ft = np.ascontiguousarray(small.ft[:, :, :k])
     small.nbr_count = np.minimum(small.nbr_count, k).astype(np.int32)
     small.need_rebuild[:] = 1
+    if "kernel" in parts:
+        fast_cases(base, small, p, dt, ctrl, still, res)
+    if "kernel_more" in parts:
+        more_cases(base, p, dt, ctrl, still, res)
+
+
+def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
+    """Sections 1, 2 and 7."""
+    # 1. shear with a normal-stress servo through list rebuilds, per-RVE step counts
+    cpu, gpu = base.copy(), base.copy()
+    engine.advance(cpu, SHEAR_STEPS, dt, p, ctrl)
+    engine.advance(gpu, SHEAR_STEPS, dt, p, ctrl, device="cuda")
+    res["shear"] = compare(cpu, gpu)
+    res["shear"]["rebuilt"] = [bool(not np.array_equal(base.h_ref[r], gpu.h_ref[r]))
+                               for r in range(2)]
+    res["shear"]["rebuilt_cpu"] = [bool(not np.array_equal(base.h_ref[r], cpu.h_ref[r]))
+                                   for r in range(2)]
+
+    # 2. a list capacity too small for the next build: engine.advance regrows, retries
     cpu, gpu = small.copy(), small.copy()
-    still = engine.rate_control(2)
     engine.advance(cpu, 10, dt, p, still)
     engine.advance(gpu, 10, dt, p, still, device="cuda")
     res["overflow"] = compare(cpu, gpu)
+
+    # 7. the resident path (device_batch.py) against the per-call one: the same kernel
+    # on the same data, so bitwise; then the same with a capacity overflow to regrow
+    res["resident"] = resident_against_per_call(base, p, dt)
+    res["resident_overflow"] = resident_against_per_call(small, p, dt)
+
+
+def more_cases(base, p, dt, ctrl, still, res) -> None:
+    """Sections 3-6, and section 1's shear run twice on the device: bitwise the same."""
+    first, again = base.copy(), base.copy()
+    engine.advance(first, SHEAR_STEPS, dt, p, ctrl, device="cuda")
+    engine.advance(again, SHEAR_STEPS, dt, p, ctrl, device="cuda")
+    res["bitwise_rerun"] = all(
+        np.array_equal(getattr(first, f), getattr(again, f))
+        for f in ("s", "v", "w", "ft", "stress", "force", "torque", "nbr_j", "unbalanced"))
 
     # 3. momentum in a fixed periodic cell without damping: contact forces are pairwise
     # opposite, so sum m v stays at its initial value up to round-off
@@ -344,17 +370,6 @@ def main(parts: list[str]) -> None:
     res["wide"]["common"] = len(brute_pairs(gpu.h[0], gpu.s[0] - np.floor(gpu.s[0]),
                                             gpu.radius[0], lambda i, j: np.full(len(i), common)))
 
-    # 7. the resident path (device_batch.py) against the per-call one: the same kernel
-    # on the same data, so bitwise; then the same with a capacity overflow to regrow
-    res["resident"] = resident_against_per_call(base, p, dt)
-    res["resident_overflow"] = resident_against_per_call(small, p, dt)
-
-    # 8. the coupled runs: the MPM on the CPU, the RVEs on the device
-    if "coupled" in parts:
-        res["coupled"] = coupled_runs()
-    res["seconds"] = time.perf_counter() - t0
-    print(json.dumps(res))
-
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or ["kernel", "coupled"])
+    main(sys.argv[1:] or ["kernel", "kernel_more", "coupled"])

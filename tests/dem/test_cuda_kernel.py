@@ -5,9 +5,10 @@ device.
 The kernel runs in a subprocess with NUMBA_ENABLE_CUDASIM=1 (cuda_sim_cases.py): the
 variable is read when numba is imported, and must not leak into this process, whose
 other tests use the compiled CPU kernels. Tiny batches (2 RVEs of 24 spheres, 10-40
-steps; the fast tier), and shrunk coupled runs (one or two RVEs of 90 spheres, 5-10
-MPM steps; the validation tier, minutes: the simulator runs each GPU thread as a Python
-thread). The same cases run once more without the simulator when a subprocess can
+steps): shear through list rebuilds, capacity overflow and the resident path in the
+fast tier, the other kernel cases with shrunk coupled runs (one or two RVEs of 90
+spheres, 5-10 MPM steps) in the validation tier (minutes: the simulator runs each GPU
+thread as a Python thread). The same cases run once more without the simulator when a subprocess can
 launch a CUDA kernel (skipped otherwise, as on machines without a GPU; on an H100 all
 pass, docs/performance.md).
 """
@@ -70,16 +71,17 @@ def _env(simulator: bool) -> dict:
     return env
 
 
-def _cases(mode: str, part: str) -> dict:
-    """The measured differences of cuda_sim_cases.py `part` (one subprocess for all the
-    tests of a part), on numba's simulator or on a real GPU if one can run a kernel here."""
+def _cases(mode: str, *parts: str) -> dict:
+    """The measured differences of cuda_sim_cases.py's `parts` (one subprocess for all
+    the tests of a fixture), on numba's simulator or on a real GPU if one can run a
+    kernel here."""
     env = _env(mode == "simulator")
     probe = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True,
                            text=True, cwd=HERE, timeout=300)
     if probe.returncode != 0:
         why = [ln for ln in probe.stderr.splitlines() if "Error" in ln][-1:] or ["?"]
         pytest.skip(f"{mode}: numba.cuda cannot run a kernel here ({why[0]})")
-    run = subprocess.run([sys.executable, str(HERE / "cuda_sim_cases.py"), part], env=env,
+    run = subprocess.run([sys.executable, str(HERE / "cuda_sim_cases.py"), *parts], env=env,
                          capture_output=True, text=True, cwd=HERE, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     res = json.loads(run.stdout.strip().splitlines()[-1])
@@ -89,14 +91,17 @@ def _cases(mode: str, part: str) -> dict:
 
 @pytest.fixture(scope="module", params=["simulator", "gpu"])
 def sim(request) -> dict:
-    """The kernel's cases: tiny batches against the CPU, the resident path (seconds)."""
+    """The kernel's core cases: shear through list rebuilds, capacity overflow, the
+    resident path; tiny batches against the CPU (under a minute on the simulator)."""
     return _cases(request.param, "kernel")
 
 
 @pytest.fixture(scope="module", params=["simulator", "gpu"])
-def sim_coupled(request) -> dict:
-    """`grainscale run --device cuda` against the CPU (minutes on the simulator)."""
-    return _cases(request.param, "coupled")
+def sim_long(request) -> dict:
+    """The kernel's further cases (momentum, damping and idle threads, reverse-list
+    overflow, spread radii) and `grainscale run --device cuda` against the CPU (minutes
+    on the simulator): the validation tier."""
+    return _cases(request.param, "kernel_more", "coupled")
 
 
 ARRAYS = ("s", "v", "w", "rot", "ft", "stress", "stress_servo", "stiffness", "force",
@@ -113,18 +118,20 @@ def test_sheared_batch_agrees_with_cpu_through_list_rebuilds(sim):
     assert res["same_counts"] and res["same_pairs"]
 
 
-def test_damping_dashpot_idle_threads_and_an_rve_without_steps(sim):
-    res = sim["damped"]
+@pytest.mark.validation
+def test_damping_dashpot_idle_threads_and_an_rve_without_steps(sim_long):
+    res = sim_long["damped"]
     for name in ARRAYS:
         assert res[name] < RTOL, (name, res[name])
     assert res["same_counts"] and res["same_pairs"]
     assert res["untouched"]  # the RVE given 0 steps keeps its state and reports
 
 
-def test_pair_cutoffs_of_widely_spread_radii_list_the_same_pairs(sim):
+@pytest.mark.validation
+def test_pair_cutoffs_of_widely_spread_radii_list_the_same_pairs(sim_long):
     """Radii 0.6-1.5 mm: the device's brute-force build and the CPU's cell list keep the
     pairs within r_i + r_j + skin, the same ones, through 12 sheared steps."""
-    res = sim["wide"]
+    res = sim_long["wide"]
     assert res["same_counts"] and res["same_pairs"]
     for name in ARRAYS:
         assert res[name] < RTOL, (name, res[name])
@@ -133,10 +140,11 @@ def test_pair_cutoffs_of_widely_spread_radii_list_the_same_pairs(sim):
     assert res["common"] > 1.33 * res["listed"], (res["common"], res["listed"])
 
 
-def test_device_runs_are_bitwise_reproducible(sim):
+@pytest.mark.validation
+def test_device_runs_are_bitwise_reproducible(sim_long):
     # the simulator interleaves its threads freely, so this also covers the order of
     # the integer atomics of the reverse list (sorted before use)
-    assert sim["shear"]["bitwise_rerun"]
+    assert sim_long["bitwise_rerun"]
 
 
 def test_capacity_overflow_is_regrown_by_engine(sim):
@@ -147,11 +155,12 @@ def test_capacity_overflow_is_regrown_by_engine(sim):
         assert res[name] < RTOL, (name, res[name])
 
 
-def test_reverse_list_overflow_is_regrown_by_engine(sim):
+@pytest.mark.validation
+def test_reverse_list_overflow_is_regrown_by_engine(sim_long):
     """One sphere named by 12 half-list entries, rows of K = 3 (2 K reverse slots): the
     device stops with OVERFLOW, engine.advance regrows K, and the retried steps agree
     with the CPU, whose rows (one entry at most) never overflowed: it keeps K = 3."""
-    res = sim["reverse_overflow"]
+    res = sim_long["reverse_overflow"]
     assert res["named"] == 12 and res["longest_row"] == 1
     assert res["capacity"][0] == 3 and res["capacity"][1] >= 6
     assert res["same_counts"] and res["same_pairs"]
@@ -159,10 +168,11 @@ def test_reverse_list_overflow_is_regrown_by_engine(sim):
         assert res[name] < RTOL, (name, res[name])
 
 
-def test_momentum_is_conserved_in_a_fixed_periodic_cell(sim):
+@pytest.mark.validation
+def test_momentum_is_conserved_in_a_fixed_periodic_cell(sim_long):
     # no damping, no cell motion: pairwise-opposite contact forces leave sum m v fixed
-    assert sim["momentum_rel"] < 1e-13
-    assert sim["force_sum_rel"] < 1e-13
+    assert sim_long["momentum_rel"] < 1e-13
+    assert sim_long["force_sum_rel"] < 1e-13
 
 
 @pytest.mark.parametrize("case", ["resident", "resident_overflow"])
@@ -184,12 +194,12 @@ def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
 
 
 @pytest.mark.validation
-def test_resident_run_retiles_writes_probes_and_resumes_bitwise(sim_coupled):
+def test_resident_run_retiles_writes_probes_and_resumes_bitwise(sim_long):
     """`grainscale run --device cuda` of the shrunk column with every cell doubled at its
     first update, a probe RVE and a checkpoint every 2 steps, its geostatic stage (7
     steps): stopped after 3 and resumed, it writes the uninterrupted run's history and
     probe frames to the byte, and its history is the CPU's within RUN_RTOL (below)."""
-    res = sim_coupled["coupled"]["retiled"]
+    res = sim_long["coupled"]["retiled"]
     assert res["rows"] >= 4 and res["probe_files"] > 0
     assert res["particles"] == 180  # every 90-sphere cell was doubled on the device path
     assert res["same_history"] and res["same_probe"]
@@ -207,11 +217,11 @@ RUN_RTOL = 1e-8
 
 @pytest.mark.parametrize("name", ["unit_element", "column"])
 @pytest.mark.validation
-def test_coupled_runs_agree_with_cpu(sim_coupled, name):
+def test_coupled_runs_agree_with_cpu(sim_long, name):
     """The MPM on the CPU with the RVEs on the device, dH and stress exchanged once per
     MPM step: the shrunk unit element (quasi-static, lateral tractions) and column
     (geostatic stage, release, real-time RVEs) give the CPU's history."""
-    res = sim_coupled["coupled"][name]
+    res = sim_long["coupled"][name]
     assert res["rows"] >= 4
     if name == "unit_element":  # the run loaded its point: strain and confinement
         assert res["last"]["axial_strain"] > 2e-5 and res["last"]["p"] > 9e4
