@@ -9,11 +9,13 @@ solver set-up, which raise ConfigError naming the key, the value and the valid r
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, field_validator, model_validator
+import tomli_w
+from pydantic import Field, PrivateAttr, field_validator, model_validator
 
-from grainscale.config.base import ConfigError, StrictModel, load_toml, read_toml
+from grainscale.config.base import ConfigError, StrictModel, load_toml, read_toml, validate
 from grainscale.config.rve import (
     IsotropicTest,
     RVECase,
@@ -405,6 +407,28 @@ class Case(StrictModel):
     undrained: UndrainedTest | None = None
     isotropic: IsotropicTest | None = None
     shear: ShearTest | None = None
+    # the folder relative paths (packings, points files) resolve against: the case
+    # file's, for a case loaded by grainscale.load_case
+    _case_dir: Path | None = PrivateAttr(default=None)
+
+    def check(self) -> Case:
+        """A validated copy of this (edited) case: every table re-read as from a file,
+        then the cross-table checks; ConfigError names the key, the value and the valid
+        range, as `grainscale run` does."""
+        fresh = validate(Case, self.model_dump(mode="json", exclude_unset=True))
+        check_case(fresh)
+        fresh._case_dir = self._case_dir
+        return fresh
+
+    def save(self, path) -> Path:
+        """Write the case as TOML that load_case reads back to the same case: the keys
+        given or edited, not the defaults (case.resolved.toml in a run's folder has
+        those). Relative paths are written as they are: save beside the original file
+        to keep them valid."""
+        path = Path(path)
+        path.write_text(tomli_w.dumps(self.model_dump(mode="json", exclude_unset=True,
+                                                      exclude_none=True)))
+        return path
 
 
 def check_case(case: Case) -> None:
@@ -519,9 +543,11 @@ def _check_probes(case: Case) -> None:
 
 
 def load_case(path) -> Case:
-    """Read, validate and cross-check a case file."""
+    """Read, validate and cross-check a case file (relative paths in it resolve against
+    its folder)."""
     case = load_toml(path, Case)
     check_case(case)
+    case._case_dir = Path(path).resolve().parent
     return case
 
 

@@ -145,13 +145,21 @@ def prepare_materials(case: Case, case_dir: Path, out: Path, comm: Comm, progres
     return factory
 
 
-def run_case(case_path, out, *, max_steps: int | None = None,
-             steps_this_run: int | None = None,
-             checkpoint_every: int | None = None, resume: bool = False,
-             allow_changed: list[str] | None = None,
-             progress: bool = True, threads: int | None = None,
-             device: str | None = None, comm: Comm | None = None) -> int:
-    """Run a case file; returns the exit code (0 done, 1 stopped by a simulation error).
+def run_case(case_path, out, **options) -> int:
+    """Run a case file (`grainscale run`): run_loaded_case of the file's validated case,
+    relative paths in it resolved against its folder."""
+    case_path = Path(case_path)
+    return run_loaded_case(load_case(case_path), case_path.parent, out, **options)
+
+
+def run_loaded_case(case: Case, case_dir, out, *, max_steps: int | None = None,
+                    steps_this_run: int | None = None,
+                    checkpoint_every: int | None = None, resume: bool = False,
+                    allow_changed: list[str] | None = None,
+                    progress: bool = True, threads: int | None = None,
+                    device: str | None = None, comm: Comm | None = None) -> int:
+    """Run a validated case (paths in it relative to `case_dir`); returns the exit code
+    (0 done, 1 stopped by a simulation error). The CLI and grainscale.run both end here.
 
     max_steps ends the run at that step of the whole run (counted from time.start, as
     time.end is a time of the whole run), so the same command given again with
@@ -163,9 +171,8 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     Input errors are raised as ConfigError, on every rank alike (the checks after the
     ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
-    case_path = Path(case_path)
+    case_dir = Path(case_dir)
     out = Path(out)
-    case = load_case(case_path)
     if device is not None:  # --device: recorded as the case's solver.device
         case.solver.device = device
     record = checkpoints.case_record(case)  # before the run fills in values
@@ -183,9 +190,9 @@ def run_case(case_path, out, *, max_steps: int | None = None,
     if resume:  # collective: every rank gets the same checkpoint, or the same error
         found = checkpoints.find(out, comm)
         checkpoints.check_case(found, record, list(allow_changed or []))
-    probes = check_geometry(case, case_path.parent)  # every input check before long work
+    probes = check_geometry(case, case_dir)  # every input check before long work
     try:
-        return _run(case, record, case_path, out, comm, max_steps, steps_this_run, every,
+        return _run(case, record, case_dir, out, comm, max_steps, steps_this_run, every,
                     found, progress, probes)
     except ConfigError:
         raise  # raised by every rank (see above): printed once by rank 0
@@ -220,13 +227,13 @@ def discard_outputs(out: Path) -> None:
             f.unlink(missing_ok=True)
 
 
-def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_steps,
+def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_steps,
          steps_this_run, every: int, found: checkpoints.Checkpoint | None,
          progress: bool, probes: list[Probe]) -> int:
     root = comm.root
     progress = progress and root
-    factory = prepare_materials(case, case_path.parent, out, comm, progress)
-    s = build_state(case, case_path.parent, n_threads=numba.get_num_threads(),
+    factory = prepare_materials(case, case_dir, out, comm, progress)
+    s = build_state(case, case_dir, n_threads=numba.get_num_threads(),
                     material_factory=factory, comm=comm)
     for mat, ids in zip(s.materials, s.mat_points, strict=True):
         if hasattr(mat, "initial_stress") and getattr(mat, "n_rve", 0):
@@ -361,7 +368,7 @@ def _run(case: Case, record: dict, case_path: Path, out: Path, comm: Comm, max_s
             step_wait += comm.wait_seconds - w0
             steps_run += 1
             if balance_every and s.step % balance_every == 0:
-                s, moved = rebalance(s, case, case_path.parent, factory, balance_every)
+                s, moved = rebalance(s, case, case_dir, factory, balance_every)
                 balance = {"rebalances": balance["rebalances"] + 1,
                            "imbalance_before_last": moved["before"],
                            "imbalance_after_last": moved["after"]}
