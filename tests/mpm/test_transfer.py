@@ -42,7 +42,9 @@ def test_g2p_conserves_momentum_without_forces(update, flip):
     is bounded by that dropped momentum plus rounding. With GIMP and APIC's non-zero C
     it is ~1e-11 of the total here, with C = 0 or linear shapes ~1e-15. The body keeps
     clear of the grid's faces, where a GIMP support would reach nodes that do not exist
-    (a boundary, which this test excludes: 1e-10 there)."""
+    (a boundary, which this test excludes: 1e-10 there). Mutation tried: the affine
+    term taken at x_I instead of x_I - x_p (P2G's dx in mpm/transfer.py) fails APIC's
+    second step."""
     s = _random_state(y=(0.05, 0.45))
     s.velocity_update, s.flip = update, flip
     for k in range(2):  # the same state stepped twice: APIC's second step has C != 0
