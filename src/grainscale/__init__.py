@@ -10,7 +10,7 @@ except PackageNotFoundError:  # running from a source tree without install
 # the Python API (docs/api.md), imported on first use so that `import grainscale` and the
 # command line stay light
 _API = ("Case", "ConfigError", "Result", "RunError", "load_case", "open_result", "run")
-__all__ = ["__version__", *_API]
+__all__ = ["__version__", "rve", *_API]
 
 
 def __getattr__(name: str):
@@ -18,4 +18,8 @@ def __getattr__(name: str):
         from grainscale import api
 
         return getattr(api, name)
+    if name == "rve":  # grainscale.rve: the RVE alone (generate, element tests)
+        import importlib
+
+        return importlib.import_module("grainscale.rve")
     raise AttributeError(f"module 'grainscale' has no attribute {name!r}")

@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from grainscale import __version__
+from grainscale import __version__, rve
 from grainscale.config.base import ConfigError
 from grainscale.config.case import load_rve_case
 from grainscale.config.rve import RVECase
-from grainscale.dem import element_tests, engine, flow
-from grainscale.dem.generate import contact_params, generate
+from grainscale.dem import element_tests, flow
+from grainscale.dem.generate import contact_params
 from grainscale.dem.state import RVEBatch
-from grainscale.io.packing import load_packing, write_packing
+from grainscale.io.packing import write_packing
 from grainscale.io.plots import plot_flow, plot_stress_path
 from grainscale.io.progress import Progress
 from grainscale.io.rve_h5 import write_rve_state
@@ -28,12 +28,9 @@ from grainscale.io.rve_vtk import write_rve_vtk
 def prepared(case: RVECase, packing: Path | None, quiet: bool) -> RVEBatch:
     """The starting RVE: read from `packing`, or generated from the [rve] table."""
     if packing is not None:
-        batch = load_packing(packing, case.rve)
-    else:
-        say = None if quiet else (lambda text: print(f"generate: {text}", file=sys.stderr))
-        batch = generate(case.rve, progress=say)
-    engine.refresh(batch, contact_params(case.rve))
-    return batch
+        return rve.packing(case, packing)
+    say = None if quiet else (lambda text: print(f"generate: {text}", file=sys.stderr))
+    return rve.generate(case, progress=say)
 
 
 def write_rows(path: Path, rows: list[dict[str, float]], title: str) -> None:
@@ -83,10 +80,10 @@ def dispatch(args: argparse.Namespace) -> int:
         return run_flow(case, args)
     batch = prepared(case, args.packing, args.quiet)
     test, run, x = {
-        "triaxial": (case.triaxial, element_tests.triaxial, "axial_strain"),
-        "undrained": (case.undrained, element_tests.undrained, "axial_strain"),
-        "isotropic": (case.isotropic, element_tests.isotropic, "volumetric_strain"),
-        "shear": (case.shear, element_tests.simple_shear, "shear_strain"),
+        "triaxial": (case.triaxial, rve.triaxial, "axial_strain"),
+        "undrained": (case.undrained, rve.undrained, "axial_strain"),
+        "isotropic": (case.isotropic, rve.isotropic, "volumetric_strain"),
+        "shear": (case.shear, rve.shear, "shear_strain"),
     }[args.rve_command]
     total = {"triaxial": getattr(test, "axial_strain", None),
              "undrained": getattr(test, "axial_strain", None),
@@ -103,7 +100,7 @@ def dispatch(args: argparse.Namespace) -> int:
             bar.update(1)
         bar.set_postfix_str(f"t={row['time']:.4g}s p={row['p']:.4g} q/p={row['q_over_p']:.3f}")
 
-    rows = run(batch, case.rve, test, on_row=on_row)
+    rows = rve.rows_of(run(case, batch, on_row=on_row))  # the API's curve, as rows
     bar.close()
     write_rows(args.out, rows, f"rve {args.rve_command} of {args.params}")
     if args.plot is not None:
