@@ -3,8 +3,8 @@
 Reads the latest checkpoint of an output folder (every RVE's cell and stress; a case
 whose only material is the "dem" one, as the column's) and
 groups the RVEs that carry stress by the narrowest width of their periodic cell, in
-grain diameters (docs/validation.md, column collapse: stretched cells 2-3 grains thick
-carry q/p ~0.9 against ~0.5 in undistorted ones).
+grain diameters (docs/validation.md §2.5: a cell stretched to 2-3 grains thick reads too
+strong, as it jams against its own periodic images).
 
     python examples/column_collapse/rve_widths.py OUT [--min-p 20]
 """
