@@ -20,7 +20,8 @@ DIR/results.json; the last printed line is one JSON object with `multiscale_runo
 of the first two, and where 95 % and 99 % of the mass of each of them ended
 (`multiscale_runout_mass95`, ...; convergence.py's measure). A step already done in
 DIR (flow.csv, a finished run) is not repeated.
-`--case examples/column_collapse/fine.toml --multiscale RUN` compares a finished run of the 5 mm column.
+`--case examples/column_collapse/fine.toml --multiscale RUN` compares a finished run of
+the 5 mm column.
 `--separation recompact` gives both continua that key (docs/mpm.md: mu(I) rheology;
 their folders, figure and results become DIR/continuum_recompact,
 DIR/baseline_recompact, DIR/cross_scale_recompact.png and DIR/results_recompact.json).
