@@ -114,7 +114,7 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
     else:
         raise TypeError(f"case: a Case or a path, not {type(case).__name__}")
     out = Path(out)
-    code = run_loaded_case(case, case._case_dir or Path.cwd(), out, max_steps=max_steps,
+    code = run_loaded_case(case, out, max_steps=max_steps,
                            steps_this_run=steps_this_run,
                            checkpoint_every=checkpoint_every, resume=resume,
                            allow_changed=allow_changed, progress=progress,

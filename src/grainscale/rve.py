@@ -101,7 +101,7 @@ def _case(params: RVECase | str | Path) -> RVECase:
 
 
 def _test(run, case: RVECase, test, start: RVEBatch | None, on_row) -> Curve:
-    batch = (start if start is not None else generate(case)).copy()
+    batch = start.copy() if start is not None else generate(case)  # start is the caller's
     rows = run(batch, case.rve, test, on_row=on_row)
     return {c: np.array([r[c] for r in rows]) for c in rows[0]}
 

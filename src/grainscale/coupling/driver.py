@@ -148,18 +148,18 @@ def prepare_materials(case: Case, case_dir: Path, out: Path, comm: Comm, progres
 def run_case(case_path, out, **options) -> int:
     """Run a case file (`grainscale run`): run_loaded_case of the file's validated case,
     relative paths in it resolved against its folder."""
-    case_path = Path(case_path)
-    return run_loaded_case(load_case(case_path), case_path.parent, out, **options)
+    return run_loaded_case(load_case(case_path), out, **options)
 
 
-def run_loaded_case(case: Case, case_dir, out, *, max_steps: int | None = None,
+def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
                     steps_this_run: int | None = None,
                     checkpoint_every: int | None = None, resume: bool = False,
                     allow_changed: list[str] | None = None,
                     progress: bool = True, threads: int | None = None,
                     device: str | None = None, comm: Comm | None = None) -> int:
-    """Run a validated case (paths in it relative to `case_dir`); returns the exit code
-    (0 done, 1 stopped by a simulation error). The CLI and grainscale.run both end here.
+    """Run a validated case (paths in it relative to the folder of the file it was loaded
+    from, else the working folder); returns the exit code (0 done, 1 stopped by a
+    simulation error). The CLI and grainscale.run both end here.
 
     max_steps ends the run at that step of the whole run (counted from time.start, as
     time.end is a time of the whole run), so the same command given again with
@@ -171,7 +171,7 @@ def run_loaded_case(case: Case, case_dir, out, *, max_steps: int | None = None,
     Input errors are raised as ConfigError, on every rank alike (the checks after the
     ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
-    case_dir = Path(case_dir)
+    case_dir = case._case_dir or Path.cwd()
     out = Path(out)
     if device is not None:  # --device: recorded as the case's solver.device
         case.solver.device = device
