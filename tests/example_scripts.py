@@ -10,10 +10,12 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 STUDIES = EXAMPLES.parent / "studies"
 
 
-def load_example(relpath: str, root: Path = EXAMPLES) -> ModuleType:
-    """examples/<relpath> (e.g. "intrusion/analyse.py"; or root/<relpath>) imported under
-    its stem, its folder on sys.path as when it runs as a script (so that it finds its
-    siblings)."""
+def load_example(relpath: str, root: Path | None = None) -> ModuleType:
+    """examples/<relpath> or, where examples/ has none, studies/<relpath> (e.g.
+    "intrusion/analyse.py"; or root/<relpath>) imported under its stem, its folder on
+    sys.path as when it runs as a script (so that it finds its siblings)."""
+    if root is None:
+        root = EXAMPLES if (EXAMPLES / relpath).is_file() else STUDIES
     path = root / relpath
     if str(path.parent) not in sys.path:
         sys.path.insert(0, str(path.parent))

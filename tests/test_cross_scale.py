@@ -1,4 +1,4 @@
-"""examples/column_collapse/cross_scale.py, as the README tells users to run it, reduced:
+"""studies/column_collapse/cross_scale.py, as the README tells users to run it, reduced:
 the flow measurement at one pressure and five inertial numbers on an 80-sphere RVE, and
 a finished small multiscale column given with --multiscale. What it must guarantee: the
 continuum carries the fit the RVE's measurement gave and nothing else of the case

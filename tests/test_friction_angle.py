@@ -1,4 +1,4 @@
-"""examples/intrusion/friction_angle.py: the mobilised angle of a known stress state along
+"""studies/intrusion/friction_angle.py: the mobilised angle of a known stress state along
 each axis, its Student-t band, and a run over generated packings of the quick
 intrusion's RVE against the recipe's measured angle."""
 

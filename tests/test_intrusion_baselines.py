@@ -1,4 +1,4 @@
-"""examples/intrusion/baselines.py (the continuum twin of a multiscale intrusion case) and
+"""studies/intrusion/baselines.py (the continuum twin of a multiscale intrusion case) and
 reshape.py (the same case on another grid or in another bed)."""
 
 import subprocess
@@ -7,7 +7,7 @@ import tomllib
 
 import pytest
 
-from example_scripts import EXAMPLES, load_example
+from example_scripts import EXAMPLES, STUDIES, load_example
 from grainscale.config.base import validate
 from grainscale.config.case import Case, check_case
 
@@ -49,7 +49,7 @@ def test_reshape_cli_writes_the_multiscale_case_in_a_deeper_bed(tmp_path):
     """The written case keeps the probes at their depth below the surface (same x, y),
     passes the loader's checks, and an existing file is not overwritten."""
     out = tmp_path / "seed_bed.toml"
-    cmd = [sys.executable, str(HERE / "reshape.py"), str(HERE / "quick.toml"),
+    cmd = [sys.executable, str(STUDIES / "intrusion" / "reshape.py"), str(HERE / "quick.toml"),
            "--quarter", "5", "4", "--out", str(out)]
     subprocess.run(cmd, check=True, capture_output=True)
     old = tomllib.loads((HERE / "quick.toml").read_text())
@@ -75,7 +75,7 @@ def test_to_depth_sets_the_end_time_from_ramp_and_velocity(tmp_path):
     assert reshape.end_time_for(case, 0.05) == pytest.approx(0.2, abs=1e-12)
     assert reshape.end_time_for(case, 0.02) == pytest.approx((2 * 0.01 * 0.2 / 0.25) ** 0.5)
     out = tmp_path / "deep.toml"
-    cmd = [sys.executable, str(HERE / "reshape.py"), str(HERE / "quick.toml"), "--out", str(out)]
+    cmd = [sys.executable, str(STUDIES / "intrusion" / "reshape.py"), str(HERE / "quick.toml"), "--out", str(out)]
     subprocess.run(cmd + ["--to-depth", "1.8"], check=True, capture_output=True)
     assert tomllib.loads(out.read_text())["time"]["end"] == pytest.approx(3.7)
     bad = subprocess.run(cmd[:-1] + [str(tmp_path / "x.toml"), "--to-depth", "3.5"],

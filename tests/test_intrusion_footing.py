@@ -1,4 +1,4 @@
-"""examples/intrusion/footing.py: the intrusion twins' Mohr-Coulomb continuum (penalty
+"""studies/intrusion/footing.py: the intrusion twins' Mohr-Coulomb continuum (penalty
 contact, psi = 0) against Prandtl's exact bearing capacity factor N_q."""
 
 import math

@@ -1,6 +1,6 @@
 """SIGKILL at every point of the step loop and of the checkpoint write, then --resume:
 history.csv, the frames and the .pvd series end byte-identical to an uninterrupted
-run's (issue 13, item 1). examples/unit_element/kill_resume.py is the long version.
+run's (issue 13, item 1). studies/unit_element/kill_resume.py is the long version.
 
 The runs kill themselves at the named points of grainscale.io.faults (GRAINSCALE_KILL_AT
 = "POINT:N[@RANK]": the Nth time the process gets there). A chain: the first run is

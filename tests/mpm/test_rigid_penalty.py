@@ -204,7 +204,7 @@ def test_rigid_contact_keys_are_checked(extra, words):
 
 @pytest.mark.validation
 def test_penalty_reaction_has_no_grid_ripple():
-    """examples/intrusion/ripple.py's elastic strip punch (plane strain, 0.05 m cells)
+    """studies/intrusion/ripple.py's elastic strip punch (plane strain, 0.05 m cells)
     pushed 0.12 m (2.4 cells) into the bed: with the penalty contact the reaction departs
     from a quadratic in depth by at most 5 % of its mean (measured 1.2 % to 0.14 m), while
     the nodes contact steps at every node plane (measured 6.4 %, over 5 times the
@@ -219,7 +219,7 @@ def test_penalty_reaction_has_no_grid_ripple():
 
 @pytest.mark.validation
 def test_flat_punch_on_elastic_half_space_gives_boussinesq_stiffness():
-    """examples/intrusion/flat_punch.py: a frictionless rigid circular punch (quarter
+    """studies/intrusion/flat_punch.py: a frictionless rigid circular punch (quarter
     model, penalty contact) on an elastic cube of side 6 a and 9 a. With the contact
     springs taken out of the series, the cube's stiffness extrapolated to an infinite
     cube (K = K_inf + c/L) is Boussinesq's 2 a_eff E / (1 - nu^2) within 5 % (the

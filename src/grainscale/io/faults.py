@@ -9,7 +9,7 @@ the target in a running process. Unset (every normal run), `point()` returns at 
 Nothing is flushed before the kill: files are left exactly as a `kill -9` (or a node's
 scheduler) leaves them. An unknown NAME is an error, so a mistyped test cannot pass by
 never killing. tests/test_kill_resume.py kills runs at every point and resumes them;
-examples/unit_element/kill_resume.py does the same on the unit element.
+studies/unit_element/kill_resume.py does the same on the unit element.
 
 The points, in the order a step reaches them (what a kill there leaves on disk):
 

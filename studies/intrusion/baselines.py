@@ -1,12 +1,12 @@
 """Continuum baselines of a multiscale intrusion case: Mohr-Coulomb and mu(I) beds in the
 very same geometry.
 
-    python examples/intrusion/baselines.py --phi-from phi.json --out DIR
+    python studies/intrusion/baselines.py --phi-from phi.json --out DIR
         [--cases quick.toml quick_cuboid.toml] [--materials mohr_coulomb mu_i]
         [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH]
         [--to-depth D_OVER_R] [--young E]
 
-For each case (beside this script unless a path is given) and material, the case with
+For each case (in examples/intrusion/ unless a path is given) and material, the case with
 its DEM material replaced by a continuum of friction angle phi (the RVE's, measured by
 friction_angle.py), the bed's density and the RVE's measured secant stiffness, run into
 DIR/<material>_<case stem>; the probes, the [rve] and [triaxial] tables and the DEM
@@ -34,7 +34,7 @@ from pathlib import Path
 import tomli_w
 from reshape import add_args, check_args, reshape, to_depth
 
-HERE = Path(__file__).resolve().parent
+CASES = Path(__file__).resolve().parents[2] / "examples" / "intrusion"  # the case files
 DENSITY = 1600.0  # kg/m3: grains of 2650 kg/m3 at porosity 0.397 (seed §4.3)
 YOUNG = 10e6  # Pa: the RVE's drained secant modulus to ~7e-4 strain at 10 kPa (validation §3)
 NU = 0.3
@@ -104,9 +104,9 @@ def main() -> None:
     width, depth = args.quarter if args.quarter is not None else (None, None)
     cases = {}  # every case built (and checked) before the first run
     for name in args.cases:
-        path = Path(name) if Path(name).is_file() else HERE / name
+        path = Path(name) if Path(name).is_file() else CASES / name
         if not path.is_file():
-            raise SystemExit(f"--cases {name}: no such file (here or in {HERE})")
+            raise SystemExit(f"--cases {name}: no such file (here or in {CASES})")
         for material in args.materials:
             case = reshape(baseline_case(path, material, phi, args.young), args.cell_size,
                            args.points_per_cell, width, depth)

@@ -1,12 +1,12 @@
 """Grid convergence of the continuum column collapse (mu(I) and Mohr-Coulomb).
 
-    python examples/column_collapse/convergence.py --out DIR [--cells 10 5 2.5 1.25]
+    python studies/column_collapse/convergence.py --out DIR [--cells 10 5 2.5 1.25]
         [--materials mu_i mohr_coulomb] [--friction-angle 22] [--points-per-cell 2]
         [--floor friction|fixed|roller|penalty] [--cfl 0.5] [--t-end 7]
         [--velocity-update apic|flip|aflip] [--flip F | --relaxation-time TAU]
         [--separation reset|recompact] [--channel W_MM --wall-friction MU_W]
 
-Runs `mu_i.toml` (beside this script) at each cell size (mm), and the same geometry with
+Runs `examples/column_collapse/mu_i.toml` at each cell size (mm), and the same geometry with
 a Mohr-Coulomb material of the given friction angle (psi = 0, no cohesion, the same
 density and elastic moduli), to 7 tau_c. The slice stays one cell thick. The options
 vary the points per cell, the floor's discretisation and the time step (run folders
@@ -49,7 +49,7 @@ from grainscale.coupling.outputs import deposit_profile, front_at_thickness  # n
 from grainscale.io.history import read_history  # noqa: E402
 from grainscale.io.vtk import PVDSeries, read_points_vtu  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
+CASES = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"  # the case files
 ASPECT = 0.6
 LENGTH = 0.1  # m, L_i
 BEAD = 1.15e-3  # m, the diameter of Lajeunesse et al.'s glass beads
@@ -75,7 +75,7 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     update); `separation` replaces the mu(I) material's (docs/mpm.md: mu(I) rheology);
     `channel` [m] makes the slice half of a channel that wide, its wall at y = channel/2
     with Coulomb friction `wall_friction` (frictionless at 0), whole cells wide."""
-    case = tomllib.loads((HERE / "mu_i.toml").read_text())
+    case = tomllib.loads((CASES / "mu_i.toml").read_text())
     case["grid"]["cell_size"] = h
     case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
     case["bodies"][0]["hi"][1] = h

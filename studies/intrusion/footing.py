@@ -1,7 +1,7 @@
 """The Mohr-Coulomb continuum of the intrusion twins against an exact limit load: a
 strip footing on a weightless bed under a surcharge, Prandtl's N_q.
 
-    python examples/intrusion/footing.py [--phi 20] [--cells-per-width 8 16]
+    python studies/intrusion/footing.py [--phi 20] [--cells-per-width 8 16]
         [--points-per-cell 2] [--settlement 0.1] [--friction 0] [--png footing.png]
 
 The slope K_phi of the intrusion (docs/validation.md §3) is the resistance that the

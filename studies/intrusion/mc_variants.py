@@ -1,10 +1,10 @@
 """The Mohr-Coulomb intrusion example against Kang's law at its own friction angle: how
 the slope K_phi moves with the bed's size, the grid and the intruder's contact.
 
-    python examples/intrusion/mc_variants.py --out DIR [--variants base wide penalty
+    python studies/intrusion/mc_variants.py --out DIR [--variants base wide penalty
         wide_penalty fine]
 
-Each variant is `mohr_coulomb.toml` (beside this script: phi = 30 deg, K_theory = 41.9)
+Each variant is `mohr_coulomb.toml` (examples/intrusion/: phi = 30 deg, K_theory = 41.9)
 with one change, run into DIR/<variant>:
 - base: as written (2.5 x 2.5 m quarter = 5 R, 2 m bed = 4 R, 0.125 m cells = 4 over R,
   the no-slip `nodes` contact);
@@ -31,7 +31,7 @@ from analyse import analyse, table
 from baselines import run
 from reshape import reshape
 
-HERE = Path(__file__).resolve().parent
+CASES = Path(__file__).resolve().parents[2] / "examples" / "intrusion"  # the case files
 PHI = 30.0  # deg, mohr_coulomb.toml's friction angle
 
 VARIANTS = {
@@ -49,7 +49,7 @@ def variant_case(width: float = 2.5, depth: float = 2.0, cell: float = 0.125,
                  contact: str | None = None, friction: float = 0.0) -> dict:
     """mohr_coulomb.toml on a width x width quarter of a bed `depth` deep [m], cells of
     `cell` m, and the intruder's contact (default: the file's)."""
-    case = reshape(tomllib.loads((HERE / "mohr_coulomb.toml").read_text()), cell,
+    case = reshape(tomllib.loads((CASES / "mohr_coulomb.toml").read_text()), cell,
                    width=width, depth=depth)
     if contact is not None:
         case["rigid"]["contact"] = contact

@@ -1,7 +1,7 @@
 """Cross-scale consistency in flow: the multiscale column against a continuum carrying its
 RVE's own measured mu(I).
 
-    python examples/column_collapse/cross_scale.py --out DIR [--case quick.toml]
+    python studies/column_collapse/cross_scale.py --out DIR [--case quick.toml]
         [--tiles 1] [--pressures 200 800] [--inertial 0.003 ... 0.8] [--multiscale RUN]
         [--separation reset|recompact]
 
@@ -42,6 +42,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
+CASES = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"  # the case files
 sys.path.insert(0, str(HERE))
 from convergence import experiment_bands, mass_runouts, measures, run_one  # noqa: E402
 
@@ -126,8 +127,8 @@ def plot(hs: dict, png: Path, name: str) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--case", type=Path, default=HERE / "quick.toml",
-                    help="the multiscale column case (default quick.toml beside this script)")
+    ap.add_argument("--case", type=Path, default=CASES / "quick.toml",
+                    help="the multiscale column case (default examples/column_collapse/quick.toml)")
     ap.add_argument("--tiles", type=int, default=1, help="supercell of the flow measurement")
     ap.add_argument("--pressures", type=float, nargs="+", default=[200.0, 800.0],
                     help="normal stresses of the flow measurement [Pa] (the column's range)")
@@ -151,7 +152,7 @@ def main() -> None:
                      args.out / f"continuum{suffix}")
     print(f"(b) continuum run: {wall_c:.0f} s", flush=True)
     ms = run_multiscale(args.case, args.out, args.multiscale)
-    beads = tomllib.loads((HERE / "mu_i.toml").read_text())["materials"]["beads"]
+    beads = tomllib.loads((CASES / "mu_i.toml").read_text())["materials"]["beads"]
     wall_b = run_one(continuum_case(args.case, beads | sep, "glass-bead mu(I) of mu_i.toml"),
                      args.out / f"baseline{suffix}")
     print(f"(d) glass-bead baseline run: {wall_b:.0f} s", flush=True)

@@ -1,6 +1,6 @@
 """How the front of a column collapse moves: by sliding on the floor or by shearing.
 
-    python examples/column_collapse/front_layers.py RUN CELL [--length 0.02]
+    python studies/column_collapse/front_layers.py RUN CELL [--length 0.02]
 
 RUN is an output folder (frames.pvd and frame_NNNNN.vtu), CELL its cell size (m). Per
 frame after release: t / tau_c, the front's x (m), the top of the material within

@@ -1,7 +1,7 @@
 """A rigid flat circular punch on an elastic half-space, with the penalty contact:
 its stiffness against Boussinesq's K = 2 a E / (1 - nu^2).
 
-    python examples/intrusion/flat_punch.py [--sizes 6 9 12] [--cells-per-radius 3]
+    python studies/intrusion/flat_punch.py [--sizes 6 9 12] [--cells-per-radius 3]
 
 Quarter model (symmetry rollers at x = 0 and y = 0): a frictionless rigid cylinder of
 radius a = 0.25 m on a cube of side L (rollers on the far sides, fixed base), linear

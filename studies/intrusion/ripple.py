@@ -1,6 +1,6 @@
 """Ripple of a rigid body's reaction: a strip punch pushed into a bed, both contact laws.
 
-    python examples/intrusion/ripple.py [--material elastic mohr_coulomb]
+    python studies/intrusion/ripple.py [--material elastic mohr_coulomb]
         [--contact nodes penalty] [--cell 0.05] [--depth 0.2] [--png ripple.png]
 
 Plane strain: a slice two cells thick between frictionless rollers, a 1 m x 0.6 m bed

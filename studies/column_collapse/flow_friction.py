@@ -1,16 +1,16 @@
 """How strong are the flowing RVEs of a column collapse, and why? Three diagnostics.
 
-    python examples/column_collapse/flow_friction.py frames OUT
+    python studies/column_collapse/flow_friction.py frames OUT
         mobilised friction sin(phi) = (s1 - s3)/(s1 + s3) of flowing (|v| > 5 cm/s) and
         resting (|v| < 5 mm/s) points in every VTK frame of a finished run;
-    python examples/column_collapse/flow_friction.py record CASE OUT [--until 2.5]
+    python studies/column_collapse/flow_friction.py record CASE OUT [--until 2.5]
         runs CASE to `until` tau_c after release, recording every step's dH, dt and
         stress per point and every RVE's state at release (OUT/record.npz, snapshot.npz);
-    python examples/column_collapse/flow_friction.py compare OUT TABLE.toml [--window 20]
+    python studies/column_collapse/flow_friction.py compare OUT TABLE.toml [--window 20]
         compares, point by point and step by step, the friction tau/sigma_n that each
         flowing RVE carried on its shear plane (read from the recorded dH) with the mu(I)
         of TABLE.toml (a `grainscale rve flow` fit) at that RVE's own sigma_n and rate;
-    python examples/column_collapse/flow_friction.py replay OUT [--points 8]
+    python studies/column_collapse/flow_friction.py replay OUT [--points 8]
         replays the recorded dH of the most sheared points on their RVEs taken at
         release: as run, rebuilt from positions (tangential history restarts, the
         control for supercells), as n x n x n supercells (the same grains n^3 times,

@@ -1,7 +1,7 @@
 """The state of the flowing material, frame by frame: how many points flow, how many of
 them carry no stress, their pressure, stress ratio, volume change and (for RVEs) porosity.
 
-    python examples/column_collapse/flow_state.py RUN [RUN ...] [--speed 0.05]
+    python studies/column_collapse/flow_state.py RUN [RUN ...] [--speed 0.05]
 
 RUN is an output folder (frames.pvd and frame_NNNNN.vtu). A point flows where its speed
 exceeds --speed (m/s). Per frame after release: t / tau_c (the column's H_i = 60 mm),

@@ -1,7 +1,7 @@
 """The friction angle of an intrusion case's RVE, for the modified Archimedes law.
 
-    python examples/intrusion/friction_angle.py CASE.toml RUN --out phi.json
-    python examples/intrusion/friction_angle.py CASE.toml --realisations 16 --out phi.json
+    python studies/intrusion/friction_angle.py CASE.toml RUN --out phi.json
+    python studies/intrusion/friction_angle.py CASE.toml --realisations 16 --out phi.json
 
 Drained triaxial compression of RVE packings (the case's [triaxial] table: confining
 pressure, rate, axial strain), one batch per loading axis (`--axes`, default x y z: the

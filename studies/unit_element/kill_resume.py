@@ -2,7 +2,7 @@
 check that history.csv ends byte-identical to an uninterrupted run's (issue 13, item 1;
 tests/test_kill_resume.py is the CI version on a reduced case).
 
-    python examples/unit_element/kill_resume.py [--case case.toml] [--out ue_kill]
+    python studies/unit_element/kill_resume.py [--case case.toml] [--out ue_kill]
         [--max-steps 3000] [--kills 24] [--checkpoint-every 100] [--ranks 1]
 
 First the run to --max-steps without a stop (OUT/ref), then the same command into
@@ -39,7 +39,7 @@ from grainscale.coupling import checkpoints
 from grainscale.distributed.comm import Comm
 from grainscale.io import faults
 
-HERE = Path(__file__).resolve().parent
+CASES = Path(__file__).resolve().parents[2] / "examples" / "unit_element"  # the case files
 
 # kinds of point, by what their count N counts in a run resumed from a checkpoint
 PER_STEP = {"step.begin": 1, "step.advanced": 0}  # hits at steps C0 + k (+1 for begin)
@@ -131,7 +131,7 @@ def identical(a: Path, b: Path) -> bool:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--case", type=Path, default=HERE / "case.toml")
+    ap.add_argument("--case", type=Path, default=CASES / "case.toml")
     ap.add_argument("--out", type=Path, default=Path("ue_kill"))
     ap.add_argument("--max-steps", type=int, default=3000)
     ap.add_argument("--kills", type=int, default=24)

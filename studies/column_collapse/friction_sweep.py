@@ -1,6 +1,6 @@
 """Mohr-Coulomb column collapse against the friction angle, in mu_i.toml's geometry.
 
-    python examples/column_collapse/friction_sweep.py --out DIR [--cell 5]
+    python studies/column_collapse/friction_sweep.py --out DIR [--cell 5]
         [--angles 20 22 25 30 35] [--velocity-update apic]
 
 Each run is mu_i.toml's column (frictional floor 0.466, one-sided frictionless back

@@ -5,7 +5,7 @@ The cell follows F = diag(e^t, 1, e^-t) at a constant rate through the RVE mater
 same path as an MPM point), with no stress control, so p wanders; compare q/p at equal
 stretch, the small cell's narrowest width in grain diameters beside it.
 
-    python examples/column_collapse/stretch_rve.py PACKING.h5 [--case quick.toml]
+    python studies/column_collapse/stretch_rve.py PACKING.h5 [--case quick.toml]
         [--rate 5] [--max-stretch 4.5]
 
 PACKING.h5: a packing of the case, e.g. OUT/packings/sand_0.h5 of a quick-column run.
@@ -27,7 +27,7 @@ from grainscale.io.rve_h5 import read_rve_state
 from grainscale.mpm.step import SimulationError
 from grainscale.stress import p_q
 
-HERE = Path(__file__).resolve().parent
+CASES = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"  # the case files
 
 
 def stretched(material: RVEMaterial, rate: float, max_stretch: float, d: float = 2e-3):
@@ -51,7 +51,7 @@ def stretched(material: RVEMaterial, rate: float, max_stretch: float, d: float =
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("packing", type=Path)
-    ap.add_argument("--case", type=Path, default=HERE / "quick.toml")
+    ap.add_argument("--case", type=Path, default=CASES / "quick.toml")
     ap.add_argument("--rate", type=float, default=5.0, help="1/s")
     ap.add_argument("--max-stretch", type=float, default=4.5)
     args = ap.parse_args()

@@ -6,7 +6,7 @@ groups the RVEs that carry stress by the narrowest width of their periodic cell,
 grain diameters (docs/validation.md §2.5: a cell stretched to 2-3 grains thick reads too
 strong, as it jams against its own periodic images).
 
-    python examples/column_collapse/rve_widths.py OUT [--min-p 20]
+    python studies/column_collapse/rve_widths.py OUT [--min-p 20]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """An intrusion case on another grid or in another bed, written as a new case file.
 
-    python examples/intrusion/reshape.py CASE --out NEW.toml
+    python studies/intrusion/reshape.py CASE --out NEW.toml
         [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH] [--to-depth D_OVER_R]
 
 `--quarter` sets the quarter's side and the bed's depth [m]; the intruder's base stays
@@ -9,7 +9,7 @@ same experiment in a wider or deeper bed. `--to-depth` ends the run when the int
 reaches that d/R (time.end from its ramp and velocity). For example the quick multiscale cylinder in
 the seed's 5 x 5 m quarter of a 4 m bed (51,200 RVEs; docs/validation.md §3):
 
-    python examples/intrusion/reshape.py examples/intrusion/quick.toml --quarter 5 4 \
+    python studies/intrusion/reshape.py examples/intrusion/quick.toml --quarter 5 4 \
         --out seed_bed.toml
 """
 
