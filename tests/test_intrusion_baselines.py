@@ -75,7 +75,8 @@ def test_to_depth_sets_the_end_time_from_ramp_and_velocity(tmp_path):
     assert reshape.end_time_for(case, 0.05) == pytest.approx(0.2, abs=1e-12)
     assert reshape.end_time_for(case, 0.02) == pytest.approx((2 * 0.01 * 0.2 / 0.25) ** 0.5)
     out = tmp_path / "deep.toml"
-    cmd = [sys.executable, str(STUDIES / "intrusion" / "reshape.py"), str(HERE / "quick.toml"), "--out", str(out)]
+    cmd = [sys.executable, str(STUDIES / "intrusion" / "reshape.py"), str(HERE / "quick.toml"),
+           "--out", str(out)]
     subprocess.run(cmd + ["--to-depth", "1.8"], check=True, capture_output=True)
     assert tomllib.loads(out.read_text())["time"]["end"] == pytest.approx(3.7)
     bad = subprocess.run(cmd[:-1] + [str(tmp_path / "x.toml"), "--to-depth", "3.5"],

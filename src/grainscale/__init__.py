@@ -10,7 +10,9 @@ except PackageNotFoundError:  # running from a source tree without install
 # the Python API (docs/api.md), imported on first use so that `import grainscale` and the
 # command line stay light
 _API = ("Case", "ConfigError", "Result", "RunError", "load_case", "open_result", "run")
-__all__ = ["__version__", "rve", *_API]
+_MODULES = ("analysis", "blocks", "rve")  # grainscale.rve: the RVE alone; analysis:
+# reading and measuring outputs; blocks: the solver's parts for hand-built studies
+__all__ = ["__version__", *_MODULES, *_API]
 
 
 def __getattr__(name: str):
@@ -18,8 +20,8 @@ def __getattr__(name: str):
         from grainscale import api
 
         return getattr(api, name)
-    if name == "rve":  # grainscale.rve: the RVE alone (generate, element tests)
+    if name in _MODULES:
         import importlib
 
-        return importlib.import_module("grainscale.rve")
+        return importlib.import_module(f"grainscale.{name}")
     raise AttributeError(f"module 'grainscale' has no attribute {name!r}")

@@ -1,17 +1,27 @@
-"""Comparing stress paths: the unit element test's multiscale curves against pure DEM.
+"""Reading and measuring what runs and RVE tests wrote (docs/api.md: grainscale.analysis).
 
-Acceptance (coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute
-deviation of q/p and of eps_v over the common axial-strain range at most 3 % of each
-curve's range. Against a DEM ensemble the verdict also weighs the realisation noise:
-"pass" (the 3 % acceptance), "within realisation noise" (peak within 3 %, each mean
-deviation within twice what chaos alone leaves between two such means), or "fail".
+Stress paths: the unit element test's multiscale curves against pure DEM. Acceptance
+(coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute deviation of
+q/p and of eps_v over the common axial-strain range at most 3 % of each curve's range.
+Against a DEM ensemble the verdict also weighs the realisation noise: "pass" (the 3 %
+acceptance), "within realisation noise" (peak within 3 %, each mean deviation within
+twice what chaos alone leaves between two such means), or "fail".
+
+Also here, for scripts: the deposit of a collapse (deposit_profile, front_at_thickness),
+the intrusion's theory (k_phi, phi_for_k: seed Eq. 29), stress invariants (p_q), one
+VTK frame's points and fields (read_frame).
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
+
+from grainscale.io.vtk import read_points_vtu as read_frame
+from grainscale.stress import p_q
+from grainscale.theory.archimedes import k_phi, phi_for_k
 
 
 def read_columns(path: str | Path) -> dict[str, np.ndarray]:
@@ -75,3 +85,30 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
                           if out["within_twice_noise"]
                           and out["peak_relative_difference"] <= 0.03 else "fail")
     return out
+
+
+
+def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
+                    spacing: float, base: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Thickness of a layer of points along one axis: bins of width `spacing` [m] from the
+    first point domain's rear edge; in each, the highest point-domain edge above `base`
+    (max of up + lp - base, 0 where a bin holds no point centre). Returns the n + 1 bin
+    boundaries and the n thicknesses [m]."""
+    lp = np.broadcast_to(np.asarray(lp, dtype=float), along.shape)
+    start = float((along - lp).min())
+    idx = np.floor((along - start) / spacing).astype(np.int64)
+    thick = np.zeros(int(idx.max()) + 1)
+    np.maximum.at(thick, idx, up + lp - base)
+    return start + spacing * np.arange(len(thick) + 1), thick
+
+
+def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float) -> float:
+    """The far boundary [m] of the last bin of a deposit_profile at least `minimum` [m]
+    thick (a front that ignores a tail thinner than `minimum`); NaN if none is."""
+    thick = np.flatnonzero(thickness >= minimum)
+    return float(edges[thick[-1] + 1]) if thick.size else math.nan
+
+
+__all__ = ["deposit_profile", "deviation", "front_at_thickness", "k_phi", "p_q",
+           "phi_for_k", "read_columns", "read_frame", "unit_element_metrics",
+           "write_columns"]

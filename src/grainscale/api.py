@@ -12,6 +12,7 @@ from Python and the same run from the command line write identical files.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -98,9 +99,13 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
         steps_this_run: int | None = None, checkpoint_every: int | None = None,
         resume: bool = False, allow_changed: list[str] | None = None,
         threads: int | None = None, device: str | None = None,
-        progress: bool = True) -> Result:
+        progress: bool = True, on_step: Callable[[object], None] | None = None) -> Result:
     """Run a case (a Case or a case file's path) into folder `out`, as `grainscale run`
     with the same options (README, docs/case-files.md) does; returns its Result.
+
+    `on_step(state)`, if given, is called after every step with the solver's state
+    (grainscale.blocks.MPMState), for studies that record what a run does not write; it
+    must only read it.
 
     Raises ConfigError for an invalid case or option before any computation, RunError if
     a simulation error stops the run (the checkpoints stay: run again with resume=True).
@@ -118,7 +123,7 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
                            steps_this_run=steps_this_run,
                            checkpoint_every=checkpoint_every, resume=resume,
                            allow_changed=allow_changed, progress=progress,
-                           threads=threads, device=device)
+                           threads=threads, device=device, on_step=on_step)
     if code != 0:
         raise RunError(f"the run into {out} stopped with a simulation error (above); its "
                        "last checkpoint is kept: run again with resume=True")

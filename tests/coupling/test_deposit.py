@@ -1,10 +1,10 @@
-"""The deposit profile of a column collapse (coupling.outputs.deposit_profile and
+"""The deposit profile of a column collapse (grainscale.analysis.deposit_profile and
 front_at_thickness) against a lattice of points filling a known wedge."""
 
 import numpy as np
 import pytest
 
-from grainscale.coupling.outputs import deposit_profile, front_at_thickness
+from grainscale.analysis import deposit_profile, front_at_thickness
 from grainscale.io.vtk import read_points_vtu, write_points_vtu
 
 

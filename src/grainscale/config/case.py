@@ -9,6 +9,7 @@ solver set-up, which raise ConfigError naming the key, the value and the valid r
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -419,6 +420,45 @@ class Case(StrictModel):
         check_case(fresh)
         fresh._case_dir = self._case_dir
         return fresh
+
+    def edited(self, change: Callable[[dict], object]) -> Case:
+        """A validated copy of this case after `change(tables)` edits its tables in
+        place: the keys given or edited as nested dicts and lists, as in the TOML (for
+        edits that replace or remove whole tables, which assignment cannot). ConfigError
+        as check()."""
+        tables = self.model_dump(mode="json", exclude_unset=True, exclude_none=True)
+        change(tables)
+        fresh = validate(Case, tables)
+        check_case(fresh)
+        fresh._case_dir = self._case_dir
+        return fresh
+
+    def continuum_twin(self, material: dict, title: str | None = None) -> Case:
+        """The same case with every material replaced by the continuum `material` (a
+        [materials.X] table as a dict, e.g. type = "mohr_coulomb" or "mu_i",
+        docs/case-files.md), under the first material's name: the same grid, bodies,
+        boundaries, rigid body, solver and output, without the DEM side ([rve] and the
+        element tests, the probes, the DEM-only history columns, checkpoints). The
+        twin of a multiscale run that a phenomenological law gives (docs/validation.md
+        §2.3, §3)."""
+        if material.get("type") == "dem":
+            raise ConfigError("continuum_twin: material.type = 'dem': give a continuum "
+                              "(mohr_coulomb, mu_i, ...)")
+
+        def change(t: dict) -> None:
+            name = next(iter(t["materials"]))
+            t["materials"] = {name: dict(material)}
+            for key in ("rve", "triaxial", "undrained", "isotropic", "shear"):
+                t.pop(key, None)
+            out = t["output"]
+            out.pop("probes", None)
+            out["checkpoint_every"] = 0
+            if "history" in out:
+                out["history"] = [c for c in out["history"] if c not in HISTORY_DEM]
+            if title is not None:
+                t["title"] = title
+
+        return self.edited(change)
 
     def save(self, path) -> Path:
         """Write the case as TOML that load_case reads back to the same case: the keys

@@ -27,6 +27,7 @@ import os
 import sys
 import time as wallclock
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 import numba
@@ -156,7 +157,8 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
                     checkpoint_every: int | None = None, resume: bool = False,
                     allow_changed: list[str] | None = None,
                     progress: bool = True, threads: int | None = None,
-                    device: str | None = None, comm: Comm | None = None) -> int:
+                    device: str | None = None, comm: Comm | None = None,
+                    on_step: Callable[[MPMState], None] | None = None) -> int:
     """Run a validated case (paths in it relative to the folder of the file it was loaded
     from, else the working folder); returns the exit code (0 done, 1 stopped by a
     simulation error). The CLI and grainscale.run both end here.
@@ -168,6 +170,9 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
     checkpoint in `out` if its case matches, but for the keys named in allow_changed.
     `device` ("cpu" or "cuda") overrides solver.device, where the DEM RVEs are stepped;
     "cuda" without a usable GPU is a ConfigError (engine.DeviceError) before any work.
+    `on_step(state)` is called on every rank after every step with the solver's state
+    (grainscale.blocks.MPMState: time, step, points, the materials' RVEs, the last
+    increment dH), to read, not to change.
     Input errors are raised as ConfigError, on every rank alike (the checks after the
     ranks start working are collective), so the job ends cleanly with one message."""
     comm = comm if comm is not None else world()
@@ -193,7 +198,7 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
     probes = check_geometry(case, case_dir)  # every input check before long work
     try:
         return _run(case, record, case_dir, out, comm, max_steps, steps_this_run, every,
-                    found, progress, probes)
+                    found, progress, probes, on_step)
     except ConfigError:
         raise  # raised by every rank (see above): printed once by rank 0
     except OSError as err:  # disk full, folder not writable: every file is written
@@ -229,7 +234,7 @@ def discard_outputs(out: Path) -> None:
 
 def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_steps,
          steps_this_run, every: int, found: checkpoints.Checkpoint | None,
-         progress: bool, probes: list[Probe]) -> int:
+         progress: bool, probes: list[Probe], on_step=None) -> int:
     root = comm.root
     progress = progress and root
     factory = prepare_materials(case, case_dir, out, comm, progress)
@@ -362,6 +367,8 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
                 dt = limit
             dt = min(dt, t_end - s.time)
             step(s, dt)
+            if on_step is not None:
+                on_step(s)
             faults.point("step.advanced")
             step_seconds += wallclock.perf_counter() - t_step
             step_comm += comm.comm_seconds - c0

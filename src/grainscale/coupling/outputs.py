@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from grainscale.analysis import deposit_profile, front_at_thickness
 from grainscale.config.case import HISTORY_DEM, Case
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.mpm.points import Points
@@ -113,27 +114,6 @@ def history_values(case: Case, s: MPMState, pts: Points,
         out.update(depth_over_R=depth / R,
                    force_normalized=force / s.rigid.area / (rho * g * R) if g > 0 else math.nan)
     return out
-
-
-def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
-                    spacing: float, base: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Thickness of a layer of points along one axis: bins of width `spacing` [m] from the
-    first point domain's rear edge; in each, the highest point-domain edge above `base`
-    (max of up + lp - base, 0 where a bin holds no point centre). Returns the n + 1 bin
-    boundaries and the n thicknesses [m]."""
-    lp = np.broadcast_to(np.asarray(lp, dtype=float), along.shape)
-    start = float((along - lp).min())
-    idx = np.floor((along - start) / spacing).astype(np.int64)
-    thick = np.zeros(int(idx.max()) + 1)
-    np.maximum.at(thick, idx, up + lp - base)
-    return start + spacing * np.arange(len(thick) + 1), thick
-
-
-def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float) -> float:
-    """The far boundary [m] of the last bin of a deposit_profile at least `minimum` [m]
-    thick (a front that ignores a tail thinner than `minimum`); NaN if none is."""
-    thick = np.flatnonzero(thickness >= minimum)
-    return float(edges[thick[-1] + 1]) if thick.size else math.nan
 
 
 def point_fields(pts: Points, fields: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
