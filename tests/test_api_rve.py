@@ -83,3 +83,105 @@ def test_generate_gives_the_cli_packing(tmp_path):
     np.testing.assert_allclose(b.s[0] @ b.h[0].T, x, rtol=0, atol=1e-15)
     with pytest.raises(TypeError, match="RVECase"):
         gs.rve.triaxial({"rve": {}})
+
+
+FLOW = """
+[rve]
+particles = 100
+radius_min = 3e-3
+radius_max = 7e-3
+friction = 0.5
+restitution = 0.9
+damping = 0.0
+[rve.preparation]
+pressure = 100e3
+"""
+
+
+def test_flow_gives_the_cli_table_and_names_bad_arguments(tmp_path):
+    """rve.flow and `grainscale rve flow` on the same packing and rates: the same steady
+    rows to the last digit (the CLI writes the API's table with repr), and the fitted
+    table is the one the CLI writes. Bad arguments are named with the API's keywords."""
+    path = tmp_path / "flow.toml"
+    path.write_text(FLOW)
+    packing = tmp_path / "p.h5"
+    assert main(["rve", "generate", str(path), "--out", str(packing), "--quiet"]) == 0
+    args = ["--rates", "20", "60", "200", "--strain", "0.6", "--steady-from", "0.2"]
+    out = tmp_path / "flow.csv"
+    assert main(["rve", "flow", str(path), "--packing", str(packing), *args, "--out",
+                 str(out), "--quiet"]) == 0
+    cli = read_columns(out)
+    case = gs.rve.load(path)
+    res = gs.rve.flow(case, gs.rve.packing(case, packing), rates=[20, 60, 200], strain=0.6,
+                      steady_from=0.2, progress=False, source=str(path))
+    assert list(res["table"]) == list(cli)
+    for key, values in res["table"].items():
+        np.testing.assert_array_equal(values, cli[key], err_msg=key)
+    if res["material"] is not None:  # three rates of a 100-sphere cell may not fit a law
+        assert out.with_suffix(".mu_i.toml").read_text() == res["material"]
+    else:
+        assert res["fit_error"] and not out.with_suffix(".mu_i.toml").exists()
+    for bad, shown in ((dict(strain=30.0), "strain = 30.0"),
+                       (dict(tiles=0), "tiles = 0"),
+                       (dict(steady_from=0.5, strain=0.6), "steady_from = 0.5"),
+                       (dict(pressures=[-5.0]), "pressures = -5.0")):
+        kw = {"rates": [20.0], **bad}
+        with pytest.raises(gs.ConfigError, match=shown):
+            gs.rve.flow(case, progress=False, **kw)
+    with pytest.raises(gs.ConfigError, match="inertial"):
+        gs.rve.flow(case, progress=False)
+
+
+def test_several_packings_tested_together_give_each_its_own_curve(params, tmp_path):
+    """packing() of several files and triaxial(per_rve=True): one curve per RVE. Two
+    copies of one packing give, each, the curve of that packing tested alone (a batch
+    shares one time step, the smallest RVE's, so only copies are comparable value for
+    value with a test alone); a different packing gives a different curve; save() writes
+    a packing that packing() reads back."""
+    case = gs.rve.load(params)
+    alone = gs.rve.triaxial(case, gs.rve.packing(case, PACKING), progress=False)
+    twice = gs.rve.triaxial(case, gs.rve.packing(case, [PACKING, PACKING]), per_rve=True,
+                            progress=False)
+    assert len(twice) == 2
+    for got in twice:
+        np.testing.assert_allclose(got["q_over_p"], alone["q_over_p"], rtol=1e-12)
+    other = tmp_path / "other.h5"
+    gs.rve.save(case, gs.rve.generate(case, seed=7, progress=False), other)
+    mixed = gs.rve.triaxial(case, gs.rve.packing(case, [PACKING, other]), per_rve=True,
+                            progress=False)
+    assert abs(mixed[0]["q_over_p"][-1] - mixed[1]["q_over_p"][-1]) > 1e-3
+    with pytest.raises(gs.ConfigError, match="does not exist"):
+        gs.rve.packing(case, [PACKING, tmp_path / "missing.h5"])
+
+
+def test_generate_caches_a_packing_by_recipe_and_seed(tmp_path):
+    """generate(path=...): the first call writes the packing, a second reads it back
+    (the same spheres, without generating: no status lines); another seed is another
+    packing and replaces it."""
+    path = tmp_path / "small.toml"
+    path.write_text("[rve]\nparticles = 60\nradius_min = 2e-3\nradius_max = 3e-3\n"
+                    "[rve.preparation]\npressure = 50e3\n")
+    cache = tmp_path / "cache.h5"
+    a = gs.rve.generate(path, path=cache, progress=False)
+    assert cache.is_file()
+    b = gs.rve.generate(path, path=cache, progress=False)
+    np.testing.assert_array_equal(a.s, b.s)
+    c = gs.rve.generate(path, seed=2, path=cache, progress=False)
+    assert not np.array_equal(a.radius, c.radius)
+    with pytest.raises(gs.ConfigError, match="path"):
+        gs.rve.generate(path, path=tmp_path / "cache.txt")
+
+
+def test_progress_in_a_log_is_a_few_plain_lines(params, capfd):
+    """With stderr a file (a batch log), an element test's progress is plain lines (one
+    at the end on a short test), never a bar redrawn at each row; progress=False is
+    silent."""
+    case = gs.rve.load(params)
+    start = gs.rve.packing(case, PACKING)
+    gs.rve.triaxial(case, start)
+    err = capfd.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln]
+    assert len(lines) == 1 and lines[0].startswith("rve triaxial: axial strain = "), err
+    assert "\r" not in err
+    gs.rve.triaxial(case, start, progress=False)
+    assert capfd.readouterr().err == ""

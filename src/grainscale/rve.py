@@ -1,6 +1,6 @@
 """The RVE alone from Python: what `grainscale rve generate|triaxial|undrained|isotropic|
-shear` do (docs/api.md, docs/dem.md), returning the packing and the curves as arrays.
-The command line calls these functions and writes what they return.
+shear|flow` do (docs/api.md, docs/dem.md), returning the packing and the curves as
+arrays. The command line calls these functions and writes what they return.
 
     from grainscale import rve
     params = rve.load("examples/rve/unit_element.toml")     # [rve] and test tables
@@ -11,18 +11,22 @@ The command line calls these functions and writes what they return.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from grainscale.config.base import ConfigError
 from grainscale.config.case import load_rve_case
 from grainscale.config.rve import RVECase
 from grainscale.dem import element_tests, engine
 from grainscale.dem.generate import contact_params
 from grainscale.dem.generate import generate as _generate
-from grainscale.dem.state import RVEBatch
-from grainscale.io.packing import load_packing
+from grainscale.dem.state import RVEBatch, concatenate
+from grainscale.io.packing import load_packing, write_packing
+from grainscale.io.progress import Progress
+from grainscale.io.rve_h5 import write_rve_state
 
 Curve = dict[str, np.ndarray]
 
@@ -34,55 +38,214 @@ def load(path: str | Path) -> RVECase:
     return load_rve_case(path)
 
 
-def generate(params: RVECase | str | Path,
-             progress: Callable[[str], None] | None = None) -> RVEBatch:
+def generate(params: RVECase | str | Path, *, seed: int | None = None,
+             path: str | Path | None = None,
+             progress: bool | Callable[[str], None] = True) -> RVEBatch:
     """A consolidated packing as [rve] asks (docs/dem.md: generation), ready to load:
-    a batch of one RVE, its contact state refreshed. `progress(text)` receives a status
-    line after each compaction stage."""
+    a batch of one RVE, its contact state refreshed.
+
+    seed: the generator's seed (default rve.seed; a multiscale run's packing k has
+    seed rve.seed + k). path: a .h5 file that caches it: read back if it holds the
+    packing of this very recipe and seed, else generated and written there. progress:
+    a status line on stderr after each compaction stage (True), none (False), or each
+    line given to a callable."""
     case = _case(params)
-    batch = _generate(case.rve, progress=progress)
-    engine.refresh(batch, contact_params(case.rve))
+    rve = case.rve if seed is None else case.rve.model_copy(update={"seed": int(seed)})
+    if path is not None:
+        from grainscale.coupling.materials import cached_packing
+
+        if Path(path).suffix != ".h5":
+            raise ConfigError(f"path = {str(path)!r}: a packing cache must end in .h5")
+        batch = cached_packing(rve.model_copy(update={"seed": case.rve.seed}),
+                               rve.seed - case.rve.seed, Path(path), progress=bool(progress))
+    else:
+        if progress is True:
+            def say(text: str) -> None:
+                print(f"generate: {text}", file=sys.stderr)
+        else:
+            say = progress or None
+        batch = _generate(rve, progress=say)
+    engine.refresh(batch, contact_params(rve))
     return batch
 
 
-def packing(params: RVECase | str | Path, path: str | Path) -> RVEBatch:
+def packing(params: RVECase | str | Path,
+            path: str | Path | Sequence[str | Path]) -> RVEBatch:
     """A packing file (.txt exchange format or .h5 state) with the contact law of
-    `params`, its contact state refreshed: the start of a test instead of generate()."""
+    `params`, its contact state refreshed: the start of a test instead of generate().
+    A list of files gives one batch of as many RVEs, tested together (per_rve)."""
     case = _case(params)
-    batch = load_packing(Path(path), case.rve)
+    paths = [path] if isinstance(path, (str, Path)) else list(path)
+    for p in paths:
+        if not Path(p).is_file():
+            raise ConfigError(f"packing = {str(p)!r}: file does not exist")
+    batch = concatenate([load_packing(Path(p), case.rve) for p in paths])
     engine.refresh(batch, contact_params(case.rve))
     return batch
+
+
+def save(params: RVECase | str | Path, batch: RVEBatch, path: str | Path) -> Path:
+    """Write RVE 0 of `batch` as `grainscale rve generate --out` does: .h5 (the full
+    state and the [rve] recipe, what a case's `packings` and packing() read back exactly)
+    or .txt (the exchange format: cell, centres, radii)."""
+    case = _case(params)
+    path = Path(path)
+    if path.suffix == ".h5":
+        write_rve_state(path, batch.take([0]), case.rve.model_dump(mode="json"))
+    elif path.suffix == ".txt":
+        write_packing(path, batch.h[0], batch.s[0] @ batch.h[0].T, batch.radius[0])
+    else:
+        raise ConfigError(f"path = {str(path)!r}: must end in .h5 or .txt")
+    return path
 
 
 def triaxial(params: RVECase | str | Path, start: RVEBatch | None = None,
-             on_row: Callable[[dict], None] | None = None) -> Curve:
+             on_row: Callable[[dict], None] | None = None, *, progress: bool = True,
+             per_rve: bool = False) -> Curve | list[Curve]:
     """Drained triaxial compression ([triaxial]: lateral stresses servo-held at the
     confining pressure, the axis compressed at the strain rate) of `start` (default: a
     packing generated from [rve]); the curve as arrays, one per column of the CLI's CSV
-    (docs/dem.md: axial_strain, p, q, q_over_p, volumetric_strain, porosity, ...)."""
+    (docs/dem.md: axial_strain, p, q, q_over_p, volumetric_strain, porosity, ...).
+    per_rve: a start of several RVEs (packing() of several files) gives one curve per
+    RVE, all tested together; else the curve of RVE 0."""
     case = _case(params)
-    return _test(element_tests.triaxial, case, case.triaxial, start, on_row)
+    return _test("triaxial", element_tests.triaxial, case, case.triaxial, start, on_row,
+                 progress, per_rve)
 
 
 def undrained(params: RVECase | str | Path, start: RVEBatch | None = None,
-              on_row: Callable[[dict], None] | None = None) -> Curve:
+              on_row: Callable[[dict], None] | None = None, *,
+              progress: bool = True) -> Curve:
     """Constant-volume compression ([undrained]) of `start`; the curve as arrays."""
     case = _case(params)
-    return _test(element_tests.undrained, case, case.undrained, start, on_row)
+    return _test("undrained", element_tests.undrained, case, case.undrained, start, on_row,
+                 progress)
 
 
 def isotropic(params: RVECase | str | Path, start: RVEBatch | None = None,
-              on_row: Callable[[dict], None] | None = None) -> Curve:
+              on_row: Callable[[dict], None] | None = None, *,
+              progress: bool = True) -> Curve:
     """Isotropic compression to [isotropic] pressure_final; the curve as arrays."""
     case = _case(params)
-    return _test(element_tests.isotropic, case, case.isotropic, start, on_row)
+    return _test("isotropic", element_tests.isotropic, case, case.isotropic, start, on_row,
+                 progress)
 
 
 def shear(params: RVECase | str | Path, start: RVEBatch | None = None,
-          on_row: Callable[[dict], None] | None = None) -> Curve:
+          on_row: Callable[[dict], None] | None = None, *, progress: bool = True) -> Curve:
     """Simple shear in x-z at constant normal stress ([shear]); the curve as arrays."""
     case = _case(params)
-    return _test(element_tests.simple_shear, case, case.shear, start, on_row)
+    return _test("shear", element_tests.simple_shear, case, case.shear, start, on_row,
+                 progress)
+
+
+def flow(params: RVECase | str | Path, start: RVEBatch | None = None, *,
+         inertial: Sequence[float] | None = None, rates: Sequence[float] | None = None,
+         pressures: Sequence[float] | None = None, strain: float = 3.0,
+         steady_from: float = 1.0, tiles: int = 1, allow_damping: bool = False,
+         material: str = "rve_fit", on_point: Callable[[dict], None] | None = None,
+         progress: bool = True, names: dict[str, str] | None = None,
+         source: str | None = None) -> dict:
+    """Steady simple shear of `start` (default: generated from [rve]), tiled
+    tiles x tiles x tiles, at each pressure [Pa] (default rve.preparation.pressure) and
+    each inertial number (or shear rate [1/s], `rates`), to `strain`, averaged from
+    `steady_from` (docs/dem.md: flow rule); the mu(I) law fitted to it.
+
+    Returns {"table": a Curve with one row per (pressure, rate), columns those of the
+    CLI's CSV (I, mu, mu_err, mu_p, sigma_n, porosity, ...), "fits": {"mu": fit of
+    mu(I), "mu_p": of mu_p(I_p)} (each mu_s, mu_2, I_0 with standard errors; empty where
+    the points do not determine a law), "material": the fitted `[materials.MATERIAL]
+    type = "mu_i"` table as TOML text (None without a fit), "diameter": the mean grain
+    diameter [m], "fit_error": why there is no fit (or None)}. on_point(row) receives
+    each row as it is measured. ConfigError names a bad argument (`names` maps these
+    keywords to the caller's spelling, e.g. the CLI's options) before any shearing;
+    `source` names the parameters in the material table's comment."""
+    from grainscale.dem import flow as _flow
+
+    case = _case(params)
+    name = {k: k for k in ("pressures", "inertial", "rates", "strain", "steady_from",
+                           "tiles", "allow_damping", "material")} | (names or {})
+    if (inertial is None) == (rates is None):
+        raise ConfigError(f"give one of {name['inertial']} and {name['rates']}")
+    pressures = list(pressures) if pressures else [case.rve.preparation.pressure]
+    speeds = list(rates if rates is not None else inertial)
+    _check_flow(case, pressures, speeds, "rates" if rates is not None else "inertial",
+                strain, steady_from, tiles, allow_damping, material, name)
+    rve = case.rve
+    start = start if start is not None else generate(case, progress=progress)
+    d = _flow.mean_diameter(start)
+    # affine (Voigt) P-wave modulus of the packing's contacts -> E at nu = 0.3: an upper
+    # bound, used only for the continuum's elastic predictor and time step
+    young = float(np.diagonal(start.stiffness[0]).mean()) * 1.3 * 0.4 / 0.7
+    batch = _flow.tile(start, tiles, seed=rve.seed)
+    points = [(p, float(g)) for p in pressures
+              for g in (speeds if rates is not None
+                        else _flow.rate_for(speeds, d, rve.density, p))]
+    dt = element_tests.timestep(batch, rve)
+    durations = []  # simulated time of each run, as simple_shear rounds it to whole steps
+    for p, g in points:
+        steps, n_rows = element_tests.shear_schedule(_flow.shear_test(p, g, strain), dt)
+        durations.append(n_rows * steps * dt)
+    bar = Progress(0.0, sum(durations), 0.0, 0, enabled=progress, label="rve flow")
+    rows = []
+    for (p, g), done in zip(points, np.cumsum([0.0, *durations[:-1]]), strict=True):
+        def on_row(row, done=done):
+            t = done + row["time"]
+            bar.update(t - bar.time, round(t / dt))
+
+        row, _ = _flow.steady_shear(batch, rve, p, g, strain, steady_from, on_row)
+        row["tiles"] = tiles
+        rows.append({c: row[c] for c in _flow.COLUMNS})
+        if on_point is not None:
+            on_point(rows[-1])
+    bar.close()
+    table = {c: np.array([r[c] for r in rows]) for c in _flow.COLUMNS}
+    fits, fit_error, toml = {}, None, None
+    try:
+        for m, i in (("mu", "I"), ("mu_p", "I_p")):
+            fits[m] = _flow.fit_mu_i(table[i], table[m], table[f"{m}_err"])
+    except ValueError as err:
+        fits, fit_error = {}, str(err)
+    if fits:
+        slowest = int(np.argmin(table["I"]))
+        toml = _flow.mu_i_table(material, fits["mu"], rve, d,
+                                float(table["porosity"][slowest]), young,
+                                source or ("the RVE" if isinstance(params, RVECase)
+                                           else str(params)))
+    return {"table": table, "fits": fits, "material": toml, "diameter": d,
+            "fit_error": fit_error}
+
+
+def _check_flow(case: RVECase, pressures, speeds, speed_key: str, strain: float,
+                steady_from: float, tiles: int, allow_damping: bool, material: str,
+                name: dict[str, str]) -> None:
+    """Every bad argument of flow() named with its value and valid range."""
+    from grainscale.dem.flow import MIN_WINDOW
+
+    for key, values in (("pressures", pressures), (speed_key, speeds)):
+        for v in values:
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"{name[key]} = {v!r}: must be a finite number > 0")
+    if not 0 < strain <= 20:
+        raise ConfigError(f"{name['strain']} = {strain!r}: valid range (0, 20]")
+    if not 0 <= steady_from <= strain - MIN_WINDOW:
+        raise ConfigError(
+            f"{name['steady_from']} = {steady_from!r}: valid range [0, {name['strain']} - "
+            f"{MIN_WINDOW}] = [0, {strain - MIN_WINDOW:.3g}] (the steady window needs "
+            "enough samples for a confidence band)")
+    if not (isinstance(tiles, int) and tiles >= 1):
+        raise ConfigError(f"{name['tiles']} = {tiles!r}: must be an integer >= 1")
+    if tiles**3 * case.rve.particles > 10_000_000:
+        raise ConfigError(f"{name['tiles']} = {tiles}: {tiles}^3 x {case.rve.particles} "
+                          "particles exceeds 10,000,000")
+    if case.rve.damping > 0 and not allow_damping:
+        raise ConfigError(
+            f"rve.damping = {case.rve.damping!r}: local damping acts as a viscosity and "
+            "changes the measured mu(I); set it to 0 (valid range for a flow "
+            f"measurement: 0), or pass {name['allow_damping']} to measure it anyway")
+    if not material.isidentifier():
+        raise ConfigError(f"{name['material']} = {material!r}: must be a TOML bare key "
+                          "(letters, digits, underscores)")
 
 
 def rows_of(curve: Curve) -> list[dict[str, float]]:
@@ -100,11 +263,43 @@ def _case(params: RVECase | str | Path) -> RVECase:
                     f"{type(params).__name__}")
 
 
-def _test(run, case: RVECase, test, start: RVEBatch | None, on_row) -> Curve:
-    batch = start.copy() if start is not None else generate(case)  # start is the caller's
-    rows = run(batch, case.rve, test, on_row=on_row)
+# what each test's progress follows: the row column, and its end in the test's table
+_MEASURE = {"triaxial": ("axial_strain", "axial_strain"),
+            "undrained": ("axial_strain", "axial_strain"),
+            "shear": ("shear_strain", "shear_strain"),
+            "isotropic": ("p", "pressure_final")}
+
+
+def _test(name: str, run, case: RVECase, test, start: RVEBatch | None, on_row,
+          progress: bool, per_rve: bool = False) -> Curve | list[Curve]:
+    if test is None:
+        raise ConfigError(f"no [{name}] table in the parameters: add one (docs/case-files.md)")
+    batch = start.copy() if start is not None else generate(case, progress=progress)
+    column, key = _MEASURE[name]
+    end = float(getattr(test, key))
+    bar = None
+
+    def seen(row: dict) -> None:
+        nonlocal bar
+        x = row[column]
+        if bar is None:  # from the first row's value: isotropic p starts where it is
+            bar = Progress(x, end, x, None, enabled=progress and end > x,
+                           quantity=column.replace("_", " "), unit="Pa" if column == "p" else "",
+                           label=f"rve {name}")
+        else:
+            bar.update(min(x, end) - bar.time)
+        bar.note(f"p={row['p']:.4g} q/p={row['q_over_p']:.3f}")
+        if on_row is not None:
+            on_row(row)
+
+    extra = {"every_rve": True} if per_rve else {}
+    rows = run(batch, case.rve, test, on_row=seen, **extra)
+    if bar is not None:
+        bar.close()
+    if per_rve:
+        return [{c: np.array([r[c] for r in one]) for c in one[0]} for one in rows]
     return {c: np.array([r[c] for r in rows]) for c in rows[0]}
 
 
-__all__ = ["Curve", "generate", "isotropic", "load", "packing", "rows_of", "shear",
-           "triaxial", "undrained"]
+__all__ = ["Curve", "flow", "generate", "isotropic", "load", "packing", "rows_of", "save",
+           "shear", "triaxial", "undrained"]
