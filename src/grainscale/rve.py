@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from grainscale.config.base import ConfigError
-from grainscale.config.case import load_rve_case
+from grainscale.config.case import Case, load_rve_case
 from grainscale.config.rve import RVECase
 from grainscale.dem import element_tests, engine
 from grainscale.dem.generate import contact_params
@@ -38,7 +38,7 @@ def load(path: str | Path) -> RVECase:
     return load_rve_case(path)
 
 
-def generate(params: RVECase | str | Path, *, seed: int | None = None,
+def generate(params: RVECase | Case | str | Path, *, seed: int | None = None,
              path: str | Path | None = None,
              progress: bool | Callable[[str], None] = True) -> RVEBatch:
     """A consolidated packing as [rve] asks (docs/dem.md: generation), ready to load:
@@ -69,7 +69,7 @@ def generate(params: RVECase | str | Path, *, seed: int | None = None,
     return batch
 
 
-def packing(params: RVECase | str | Path,
+def packing(params: RVECase | Case | str | Path,
             path: str | Path | Sequence[str | Path]) -> RVEBatch:
     """A packing file (.txt exchange format or .h5 state) with the contact law of
     `params`, its contact state refreshed: the start of a test instead of generate().
@@ -84,7 +84,7 @@ def packing(params: RVECase | str | Path,
     return batch
 
 
-def save(params: RVECase | str | Path, batch: RVEBatch, path: str | Path) -> Path:
+def save(params: RVECase | Case | str | Path, batch: RVEBatch, path: str | Path) -> Path:
     """Write RVE 0 of `batch` as `grainscale rve generate --out` does: .h5 (the full
     state and the [rve] recipe, what a case's `packings` and packing() read back exactly)
     or .txt (the exchange format: cell, centres, radii)."""
@@ -99,7 +99,7 @@ def save(params: RVECase | str | Path, batch: RVEBatch, path: str | Path) -> Pat
     return path
 
 
-def triaxial(params: RVECase | str | Path, start: RVEBatch | None = None,
+def triaxial(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
              on_row: Callable[[dict], None] | None = None, *, progress: bool = True,
              per_rve: bool = False) -> Curve | list[Curve]:
     """Drained triaxial compression ([triaxial]: lateral stresses servo-held at the
@@ -113,7 +113,7 @@ def triaxial(params: RVECase | str | Path, start: RVEBatch | None = None,
                  progress, per_rve)
 
 
-def undrained(params: RVECase | str | Path, start: RVEBatch | None = None,
+def undrained(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
               on_row: Callable[[dict], None] | None = None, *,
               progress: bool = True) -> Curve:
     """Constant-volume compression ([undrained]) of `start`; the curve as arrays."""
@@ -122,7 +122,7 @@ def undrained(params: RVECase | str | Path, start: RVEBatch | None = None,
                  progress)
 
 
-def isotropic(params: RVECase | str | Path, start: RVEBatch | None = None,
+def isotropic(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
               on_row: Callable[[dict], None] | None = None, *,
               progress: bool = True) -> Curve:
     """Isotropic compression to [isotropic] pressure_final; the curve as arrays."""
@@ -131,7 +131,7 @@ def isotropic(params: RVECase | str | Path, start: RVEBatch | None = None,
                  progress)
 
 
-def shear(params: RVECase | str | Path, start: RVEBatch | None = None,
+def shear(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
           on_row: Callable[[dict], None] | None = None, *, progress: bool = True) -> Curve:
     """Simple shear in x-z at constant normal stress ([shear]); the curve as arrays."""
     case = _case(params)
@@ -139,7 +139,7 @@ def shear(params: RVECase | str | Path, start: RVEBatch | None = None,
                  progress)
 
 
-def flow(params: RVECase | str | Path, start: RVEBatch | None = None, *,
+def flow(params: RVECase | Case | str | Path, start: RVEBatch | None = None, *,
          inertial: Sequence[float] | None = None, rates: Sequence[float] | None = None,
          pressures: Sequence[float] | None = None, strain: float = 3.0,
          steady_from: float = 1.0, tiles: int = 1, allow_damping: bool = False,
@@ -254,12 +254,19 @@ def rows_of(curve: Curve) -> list[dict[str, float]]:
     return [{k: float(v[i]) for k, v in curve.items()} for i in range(n)]
 
 
-def _case(params: RVECase | str | Path) -> RVECase:
+def _case(params: RVECase | Case | str | Path) -> RVECase:
+    """The RVE tables of an RVECase, a file, or a multiscale Case (gs.load_case)."""
     if isinstance(params, RVECase):
         return params
     if isinstance(params, (str, Path)):
         return load(params)
-    raise TypeError(f"params: an RVECase (grainscale.rve.load) or a path, not "
+    if isinstance(params, Case):
+        if params.rve is None:
+            raise ConfigError("the case has no [rve] table (a multiscale case's RVE)")
+        tests = {k: getattr(params, k) for k in ("triaxial", "undrained", "isotropic", "shear")
+                 if getattr(params, k) is not None}
+        return RVECase(rve=params.rve, **tests)
+    raise TypeError(f"params: an RVECase (grainscale.rve.load), a Case or a path, not "
                     f"{type(params).__name__}")
 
 
