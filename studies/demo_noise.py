@@ -19,17 +19,15 @@ import argparse
 import itertools
 import json
 import math
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from grainscale import blocks, rve
 from grainscale.analysis import unit_element_metrics
-from grainscale.cli.demo import demo_case
-from grainscale.config.case import load_rve_case
-from grainscale.dem.element_tests import triaxial
-from grainscale.dem.generate import generate
-from grainscale.dem.state import concatenate
 
 REPLICAS = 8  # the demo's ensemble size
 
@@ -37,20 +35,19 @@ REPLICAS = 8  # the demo's ensemble size
 def ensembles(groups: int, seed: int) -> list[dict[str, np.ndarray]]:
     """GROUPS disjoint 8-realisation means of the demo's RVE, with their standard errors
     (the columns triaxial_ensemble returns)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "case.toml"
-        path.write_text(demo_case())
-        case = load_rve_case(path)
-    packing = generate(case.rve)
+    with tempfile.TemporaryDirectory() as tmp:  # the demo's own case file
+        subprocess.run([sys.executable, "-m", "grainscale", "demo", "--out", tmp,
+                        "--case-only"], check=True, capture_output=True)
+        case = rve.load(Path(tmp) / "case.toml")
+    packing = rve.generate(case, progress=False)
     rng = np.random.default_rng(seed)
     copies = []
     for _ in range(REPLICAS * groups):
         b = packing.copy()
         b.v += rng.normal(0.0, 1e-9, b.v.shape)
         copies.append(b)
-    per_rve = triaxial(concatenate(copies), case.rve, case.triaxial, every_rve=True)
-    cols = per_rve[0][0].keys()
-    paths = {k: np.array([[row[k] for row in rows] for rows in per_rve]) for k in cols}
+    per_rve = rve.triaxial(case, blocks.concatenate(copies), per_rve=True)
+    paths = {k: np.array([curve[k] for curve in per_rve]) for k in per_rve[0]}
     out = []
     for g in range(groups):
         part = {k: v[g * REPLICAS:(g + 1) * REPLICAS] for k, v in paths.items()}

@@ -32,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="run the demonstration case and write its plots")
     demo.add_argument("--out", type=Path, default=Path("grainscale-demo"),
                       help="output folder (default: ./grainscale-demo)")
+    demo.add_argument("--case-only", action="store_true",
+                      help="write the demo's case file, OUT/case.toml, and stop")
 
     run = sub.add_parser("run", help="run an MPM (or MPM x DEM) case file")
     run.add_argument("case", type=Path, help="case file (TOML)")
@@ -126,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "demo":
             from grainscale.cli.demo import run_demo
 
-            return run_demo(args.out)
+            return run_demo(args.out, case_only=args.case_only)
         if args.command == "run":
             from grainscale.coupling.driver import run_case
             from grainscale.distributed.comm import world

@@ -136,7 +136,7 @@ def demo_case(particles: int = 300, strain: float = 0.3, rate: float = 0.5,
                        row_strain=strain / 100)
 
 
-def run_demo(out: Path, **reductions) -> int:
+def run_demo(out: Path, case_only: bool = False, **reductions) -> int:
     from grainscale.cli import main as grainscale
 
     out = Path(out)
@@ -144,6 +144,9 @@ def run_demo(out: Path, **reductions) -> int:
     t0 = time.perf_counter()
     case = out / "case.toml"
     case.write_text(demo_case(**reductions))
+    if case_only:
+        print(f"wrote {case}")
+        return 0
     say = lambda text: print(text, file=sys.stderr)  # noqa: E731
     say(f"grainscale demo -> {out}/ (the first run compiles the kernels, ~30 s)")
     say("1/3 multiscale unit element test: MPM cube, 8 points, an RVE each")
