@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import shutil
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import grainscale as gs
 from grainscale.cli import main
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
 
 # a Mohr-Coulomb block slumping under gravity (test_mpi.py's case without the traction)
 BLOCK = """
@@ -138,3 +142,51 @@ def test_relative_paths_resolve_against_the_case_file(tmp_path):
     r = gs.run(case, tmp_path / "o", progress=False)
     assert r.history["time"][-1] == pytest.approx(0.01)
     shutil.rmtree(tmp_path / "o")
+
+
+def test_on_step_sees_every_step_and_changes_nothing(block, tmp_path):
+    """run(on_step=f): f gets the state after each of the 40 steps, in order, at the
+    times history.csv records; a run with the hook writes the history a run without it
+    writes, byte for byte."""
+    seen = []
+
+    def record(state):
+        seen.append((state.step, state.time, state.last_dt, state.dH.shape))
+
+    r = gs.run(block, tmp_path / "hooked", max_steps=40, progress=False, on_step=record)
+    gs.run(block, tmp_path / "plain", max_steps=40, progress=False)
+    assert [s[0] for s in seen] == list(range(1, 41))
+    times = np.array([s[1] for s in seen])
+    np.testing.assert_allclose(np.diff(times), [s[2] for s in seen[1:]], rtol=1e-12)
+    h = r.history
+    np.testing.assert_array_equal(times[h["step"][1:].astype(int) - 1], h["time"][1:])
+    assert seen[0][3] == (r.cost["points"], 3, 3)
+    assert (tmp_path / "hooked" / "history.csv").read_bytes() == (
+        tmp_path / "plain" / "history.csv").read_bytes()
+
+
+def test_edited_and_continuum_twin(tmp_path):
+    """case.edited replaces or removes whole tables and validates the result;
+    continuum_twin of the multiscale intrusion keeps its geometry and drops exactly its
+    DEM side, and refuses a DEM material."""
+    case = gs.load_case(EXAMPLES / "intrusion" / "quick.toml")
+    twin = case.continuum_twin({"type": "mohr_coulomb", "density": 1600.0,
+                                "youngs_modulus": 10e6, "poisson_ratio": 0.3,
+                                "friction_angle": 20.0}, title="twin")
+    assert twin.title == "twin" and list(twin.materials) == list(case.materials)
+    assert twin.materials[next(iter(twin.materials))].type == "mohr_coulomb"
+    assert twin.rve is None and twin.triaxial is None and twin.output.probes == []
+    assert twin.output.checkpoint_every == 0
+    assert not {"porosity", "coordination", "mean_rotation"} & set(twin.output.history)
+    assert [c for c in case.output.history
+            if c not in ("porosity", "coordination", "mean_rotation")] == twin.output.history
+    assert twin.grid == case.grid and twin.bodies == case.bodies and twin.rigid == case.rigid
+    assert twin._case_dir == case._case_dir
+    with pytest.raises(gs.ConfigError, match="continuum"):
+        case.continuum_twin({"type": "dem"})
+
+    def drop_rve(t):
+        del t["rve"]
+
+    with pytest.raises(gs.ConfigError, match="needs an \\[rve\\] table"):
+        case.edited(drop_rve)  # a 'dem' material without its RVE
