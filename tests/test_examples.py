@@ -85,3 +85,12 @@ def test_tour_notebook_runs_and_its_two_stress_paths_agree(tmp_path):
     assert any("image/png" in o.get("data", {}) for o in outputs)
     assert (tmp_path / "tour_out" / "history.csv").is_file()
     assert float(outputs[-1]["text"]) < 0.10
+
+
+def test_demo_case_only_writes_the_demo_case_and_stops(tmp_path):
+    """`grainscale demo --case-only`: the demo's case file (studies/demo_noise.py reads
+    it), valid, and nothing run."""
+    assert main(["demo", "--out", str(tmp_path), "--case-only"]) == 0
+    case = load_case(tmp_path / "case.toml")
+    assert case.rve.particles == 300 and case.triaxial.axial_strain == 0.3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["case.toml"]
