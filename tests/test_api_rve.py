@@ -81,8 +81,14 @@ def test_generate_gives_the_cli_packing(tmp_path):
     np.testing.assert_allclose(b.h[0], h, rtol=1e-15)
     np.testing.assert_allclose(b.radius[0], r, rtol=1e-15)
     np.testing.assert_allclose(b.s[0] @ b.h[0].T, x, rtol=0, atol=1e-15)
+    import tomllib  # the same tables given as a dict: the same packing
+
+    d = gs.rve.generate(tomllib.loads(path.read_text()), progress=False)
+    np.testing.assert_array_equal(d.s, b.s)
+    with pytest.raises(gs.ConfigError, match="particles"):
+        gs.rve.generate({"rve": {"particles": -3}})
     with pytest.raises(TypeError, match="RVECase"):
-        gs.rve.triaxial({"rve": {}})
+        gs.rve.triaxial(42)
 
 
 FLOW = """

@@ -255,18 +255,23 @@ def rows_of(curve: Curve) -> list[dict[str, float]]:
 
 
 def _case(params: RVECase | Case | str | Path) -> RVECase:
-    """The RVE tables of an RVECase, a file, or a multiscale Case (gs.load_case)."""
+    """The RVE tables of an RVECase, a file, a dict of tables ({"rve": {...},
+    "triaxial": {...}}) or a multiscale Case (gs.load_case)."""
     if isinstance(params, RVECase):
         return params
     if isinstance(params, (str, Path)):
         return load(params)
+    if isinstance(params, dict):  # the tables as a TOML file holds them
+        from grainscale.config.base import validate
+
+        return validate(RVECase, params, source="params")
     if isinstance(params, Case):
         if params.rve is None:
             raise ConfigError("the case has no [rve] table (a multiscale case's RVE)")
         tests = {k: getattr(params, k) for k in ("triaxial", "undrained", "isotropic", "shear")
                  if getattr(params, k) is not None}
         return RVECase(rve=params.rve, **tests)
-    raise TypeError(f"params: an RVECase (grainscale.rve.load), a Case or a path, not "
+    raise TypeError(f"params: an RVECase (grainscale.rve.load), a Case, a dict or a path, not "
                     f"{type(params).__name__}")
 
 
