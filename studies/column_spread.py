@@ -19,15 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+import grainscale as gs
 from grainscale.analysis import read_columns
-from grainscale.io.vtk import PVDSeries, read_points_vtu
 
 
 def measures(run: Path, length: float) -> dict:
     """The run's measures at its last history row and last frame (see the module)."""
     h = read_columns(run / "history.csv")
-    frames = PVDSeries.load(run / "frames.pvd").entries
-    x = read_points_vtu(run / frames[-1][1])[0][:, 0]
+    x = gs.open_result(run).frames()[-1][1].points[:, 0]
     q99, q95 = np.quantile(x, [0.99, 0.95])
     ke = h["kinetic_energy"]
     return {"run": str(run), "t_over_tc": round(float(h["t_over_tc"][-1]), 3),

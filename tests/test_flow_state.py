@@ -51,6 +51,7 @@ def test_mass_runouts_of_the_last_frame(tmp_path):
         pts[:, 0] = x
         write_points_vtu(tmp_path / f"frame_{k}.vtu", pts, {"p": np.zeros(100)})
         series.add(0.1 * k, tmp_path / f"frame_{k}.vtu")
+    (tmp_path / "history.csv").write_text("time\n0.0\n0.1\n")  # a run's folder
     m = conv.mass_runouts(tmp_path)
     assert m["runout_mass95"] == pytest.approx((0.101 + 0.099 * 0.95 - 0.1) / 0.1, rel=1e-12)
     assert m["runout_mass99"] == pytest.approx((0.101 + 0.099 * 0.99 - 0.1) / 0.1, rel=1e-12)

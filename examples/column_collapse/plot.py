@@ -16,11 +16,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from grainscale.io.history import read_history  # noqa: E402
+import grainscale as gs  # noqa: E402
 
 
 def plot(out_dir: Path, png: Path, aspect: float = 0.6) -> Path:
-    h = read_history(out_dir / "history.csv")
+    h = gs.open_result(out_dir).history
     after = h["t_over_tc"] >= 0
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], "k-", label="MPM (this run)")

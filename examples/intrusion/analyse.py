@@ -41,7 +41,7 @@ shortest window (from d_max - min_span) is used and the rule is reported as "fal
 The standard errors are ordinary least squares ones (independent residuals assumed); the
 reaction's ripple with depth is correlated, so read them as lower bounds.
 
-Theory: K_theory = k_phi(phi) from grainscale.theory.archimedes (seed Eq. 27-29, Kang et
+Theory: K_theory = k_phi(phi) from grainscale.analysis (seed Eq. 27-29, Kang et
 al. 2018, Eq. 29c without the printed inner R), phi the friction angle measured on the
 RVE (--phi, or --phi-from a JSON file with {"phi_deg": ...}). Each fitted slope is also
 turned into the angle it implies (phi_for_k). Where the JSON also gives the angle's 95 %
@@ -68,8 +68,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from grainscale.io import history  # noqa: E402
-from grainscale.theory.archimedes import k_phi, phi_for_k  # noqa: E402
+import grainscale as gs  # noqa: E402
+from grainscale.analysis import k_phi, phi_for_k  # noqa: E402
 
 REQUIRED = ("depth_over_R", "force_normalized")
 START_STEP = 0.05   # R: spacing of candidate window starts
@@ -81,9 +81,12 @@ class InputError(Exception):
 
 
 def read_history(path: Path) -> dict[str, np.ndarray]:
-    """grainscale.io.history.read_history, its errors as InputError."""
+    """The columns of a run's history.csv (gs.open_result(...).history: a last row cut
+    short is dropped), its errors as InputError."""
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
     try:
-        return history.read_history(path)
+        return gs.open_result(path.parent).history
     except ValueError as err:
         raise InputError(str(err)) from None
 

@@ -25,8 +25,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from grainscale.io.history import read_history  # noqa: E402
-from grainscale.io.vtk import read_points_vtu  # noqa: E402
+import grainscale as gs  # noqa: E402
+from grainscale.analysis import read_frame  # noqa: E402
 
 
 def frames(out: Path) -> list[tuple[float, Path]]:
@@ -41,7 +41,10 @@ def main() -> None:
     ap.add_argument("--depths", type=float, nargs="+", default=[0.5, 1.0], help="d/R")
     ap.add_argument("--png", type=Path, default=None)
     args = ap.parse_args()
-    hist = read_history(args.out / "history.csv")
+    try:
+        hist = gs.open_result(args.out).history
+    except ValueError as err:
+        raise SystemExit(str(err)) from None
     for col in ("time", "depth_over_R"):
         if col not in hist:
             raise SystemExit(f"{args.out / 'history.csv'}: no column {col!r}")
@@ -59,7 +62,7 @@ def main() -> None:
     vmax = 0.0
     data = []
     for *_, f in chosen:
-        x, fields = read_points_vtu(f)
+        x, fields = read_frame(f)
         rate = np.asarray(fields["rotation_rate"]).ravel()
         near = x[:, 1] < spacing
         data.append((x[near], rate[near]))

@@ -16,37 +16,33 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
-from grainscale.analysis import read_columns, unit_element_metrics, write_columns
-from grainscale.cli import main as grainscale
-from grainscale.config.case import load_rve_case
-from grainscale.dem import element_tests
-from grainscale.dem.generate import generate
-from grainscale.io.plots import plot_stress_path
+import grainscale as gs
+from grainscale import rve
+from grainscale.analysis import (
+    plot_stress_path,
+    read_columns,
+    unit_element_metrics,
+    write_columns,
+)
 
 HERE = Path(__file__).resolve().parent
 
 
-def dem_ensemble(case: Path, replicas: int) -> dict[str, np.ndarray]:
-    """Mean stress path of `replicas` perturbed copies of the case's RVE."""
-    c = load_rve_case(case)
-    return element_tests.triaxial_ensemble(generate(c.rve), c.rve, c.triaxial, replicas)
-
-
 def compare(case: Path, out: Path, quiet: bool = False, replicas: int = 0) -> dict:
     out.mkdir(parents=True, exist_ok=True)
-    flags = ["--quiet"] if quiet else []
-    if grainscale(["run", str(case), "--out", str(out / "multiscale"), *flags]) != 0:
-        raise SystemExit("the multiscale run failed")
-    if grainscale(["rve", "triaxial", str(case), "--out", str(out / "dem.csv"), *flags]) != 0:
-        raise SystemExit("the pure DEM test failed")
+    try:
+        gs.run(case, out / "multiscale", progress=not quiet)
+    except gs.RunError:
+        raise SystemExit("the multiscale run failed") from None
+    params = rve.load(case)
+    packing = rve.generate(params, progress=not quiet)  # as `grainscale rve triaxial` does
+    dem = rve.triaxial(params, packing, progress=not quiet)
+    write_columns(out / "dem.csv", dem)
     ms = read_columns(out / "multiscale" / "history.csv")
-    dem = read_columns(out / "dem.csv")
     metrics = unit_element_metrics(dem, ms)
     curves = {"pure DEM (drained triaxial)": dem, "MPM x DEM (8 points)": ms}
     if replicas:
-        ens = dem_ensemble(case, replicas)
+        ens = rve.triaxial_ensemble(params, packing, replicas=replicas, progress=False)
         write_columns(out / "dem_ensemble.csv", ens)
         metrics["against_dem_ensemble"] = unit_element_metrics(ens, ms)
         metrics["dem_replicas"] = replicas

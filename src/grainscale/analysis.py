@@ -66,7 +66,7 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
         out[f"mad_{k}_over_{w}_range"] <= 0.03 for k in ("q_over_p", "volumetric_strain")
         for w in ("dem", "multiscale")))
     if all(f"{k}_sem" in dem for k in ("q_over_p", "volumetric_strain")):
-        # a DEM ensemble mean (element_tests.triaxial_ensemble) against a multiscale
+        # a DEM ensemble mean (grainscale.rve.triaxial_ensemble) against a multiscale
         # curve averaged over as many RVEs: chaos alone leaves their difference normal
         # with std sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi)
         grid = np.linspace(0.0, x_max, 501)
@@ -109,6 +109,25 @@ def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float)
     return float(edges[thick[-1] + 1]) if thick.size else math.nan
 
 
+
+def plot_stress_path(path: str | Path, curves: dict[str, dict], x: str = "axial_strain",
+                     title: str = "") -> None:
+    """A PNG of q/p and eps_v against `x` for labelled curves side by side (`curves`:
+    label -> columns {x, "q_over_p", "volumetric_strain"}, e.g. rve.triaxial's curve and
+    a run's history): the plot of `grainscale rve triaxial --plot` and of the demo."""
+    from grainscale.io.plots import plot_stress_path as plot
+
+    plot(path, curves, x=x, title=title)
+
+
+def plot_flow(path: str | Path, table: dict, fits: dict, title: str = "") -> None:
+    """A PNG of rve.flow's result: steady mu against I in both measures with their 95 %
+    bands and fitted laws, and the porosity against I (`grainscale rve flow --plot`)."""
+    from grainscale.io.plots import plot_flow as plot
+
+    plot(path, table, fits, title=title)
+
+
 __all__ = ["deposit_profile", "deviation", "front_at_thickness", "k_phi", "p_q",
-           "phi_for_k", "read_columns", "read_frame", "unit_element_metrics",
-           "write_columns"]
+           "phi_for_k", "plot_flow", "plot_stress_path", "read_columns", "read_frame",
+           "unit_element_metrics", "write_columns"]

@@ -34,8 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import time
-import tomllib
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -43,11 +42,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import tomli_w  # noqa: E402
 
-from grainscale.coupling.outputs import deposit_profile, front_at_thickness  # noqa: E402
-from grainscale.io.history import read_history  # noqa: E402
-from grainscale.io.vtk import PVDSeries, read_points_vtu  # noqa: E402
+import grainscale as gs  # noqa: E402
+from grainscale.analysis import deposit_profile, front_at_thickness  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # studies/: variants.py
+from variants import run_variant  # noqa: E402
 
 CASES = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"  # the case files
 ASPECT = 0.6
@@ -61,7 +61,7 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
             update: str | None = None, flip: float | None = None,
             relaxation_time: float | None = None, separation: str | None = None,
             nonlocal_amplitude: float = 0.48, fluidity_time: float = 1e-4,
-            channel: float | None = None, wall_friction: float = 0.0) -> dict:
+            channel: float | None = None, wall_friction: float = 0.0) -> gs.Case:
     """mu_i.toml with cells of h metres (and a slice one cell thick), its Mohr-Coulomb
     twin, or its nonlocal twin (`nonlocal_mu_i`, the same beads with amplitude A and
     fluidity time t_0; docs/mpm.md: nonlocal mu(I)); n x n x n points a cell; the floor
@@ -74,67 +74,73 @@ def case_at(h: float, material: str, friction_angle: float, points_per_cell: int
     solver.velocity_relaxation_time [s] when `update` is given (docs/mpm.md: velocity
     update); `separation` replaces the mu(I) material's (docs/mpm.md: mu(I) rheology);
     `channel` [m] makes the slice half of a channel that wide, its wall at y = channel/2
-    with Coulomb friction `wall_friction` (frictionless at 0), whole cells wide."""
-    case = tomllib.loads((CASES / "mu_i.toml").read_text())
-    case["grid"]["cell_size"] = h
-    case["grid"]["cells"] = [round(X_EXTENT / h), 2, round(Z_EXTENT / h)]
-    case["bodies"][0]["hi"][1] = h
-    case["bodies"][0]["points_per_cell"] = points_per_cell
-    case["solver"]["cfl"] = cfl
-    solver = case["solver"]
-    if update is not None:
-        solver["velocity_update"] = update
-        solver.pop("flip", None)
-        solver.pop("velocity_relaxation_time", None)
-        if flip is not None:
-            solver["flip"] = flip
-        if relaxation_time is not None:
-            solver["velocity_relaxation_time"] = relaxation_time
-    if material == "nonlocal_mu_i":
-        case["materials"]["beads"].update(type="nonlocal_mu_i",
-                                          nonlocal_amplitude=nonlocal_amplitude,
-                                          fluidity_time=fluidity_time)
-    if separation is not None and material in ("mu_i", "nonlocal_mu_i"):
-        case["materials"]["beads"]["separation"] = separation
-    if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
-        case["time"]["end"] = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
-    for bc in case["boundaries"]:
-        if "box" in bc:
-            bc["box"]["hi"][1] = h
-            if bc.get("normal") == "y":
-                bc["box"]["lo"][1] = h
-    if channel is not None:
-        case["grid"]["cells"][1] = channel_cells(h, channel, wall_friction)
-        case["bodies"][0]["hi"][1] = channel / 2
-        case["boundaries"] = [bc for bc in case["boundaries"] if bc.get("normal") != "y"]
-        for bc in case["boundaries"]:
-            if "box" in bc:
-                bc["box"]["hi"][1] = channel / 2
-        case["boundaries"].append({"type": "friction", "face": "y+", "friction": wall_friction}
-                                  if wall_friction > 0 else {"type": "roller", "face": "y+"})
-    floor_bc = case["boundaries"][0]
-    assert floor_bc.get("face") == "z-" and floor_bc["type"] == "friction"
-    if floor in ("fixed", "roller"):
-        case["boundaries"][0] = {"type": floor, "face": "z-"}
-    elif floor == "penalty":
-        del case["boundaries"][0]
-        case["grid"]["origin"][2] = -2 * h
-        case["grid"]["cells"][2] += 2
-        case["rigid"] = {"shape": "box", "lo": [-h, -h, -2 * h], "hi": [X_EXTENT + h, 2 * h, 0.0],
-                         "velocity": [0.0, 0.0, 0.0], "contact": "penalty", "clip_to_grid": True,
-                         "friction": floor_bc["friction"]}
-    elif floor != "friction":
+    with Coulomb friction `wall_friction` (frictionless at 0), whole cells wide.
+    The validated gs.Case (ConfigError names a bad value)."""
+    if floor not in ("friction", "fixed", "roller", "penalty"):
         raise ValueError(f"floor = {floor!r}: one of friction, fixed, roller, penalty")
-    if material == "mohr_coulomb":
-        mu = case["materials"]["beads"]
-        case["materials"]["beads"] = {
-            "type": "mohr_coulomb", "density": mu["density"],
-            "youngs_modulus": mu["youngs_modulus"], "poisson_ratio": mu["poisson_ratio"],
-            "friction_angle": friction_angle, "dilation_angle": 0.0}
-    case["title"] = f"column collapse, {material}, {h * 1e3:g} mm cells" + (
+    half = channel_cells(h, channel, wall_friction) if channel is not None else None
+    case = gs.load_case(CASES / "mu_i.toml")
+    case.grid.cell_size = h
+    case.grid.cells = [round(X_EXTENT / h), 2 if half is None else half, round(Z_EXTENT / h)]
+    case.bodies[0].hi = [case.bodies[0].hi[0], h if channel is None else channel / 2,
+                         case.bodies[0].hi[2]]
+    case.bodies[0].points_per_cell = points_per_cell
+    case.solver.cfl = cfl
+    if t_end != 7.0:  # (mu_i.toml's own end is 7 tau_c)
+        case.time.end = t_end * math.sqrt(0.06 / 9.81)  # its H_i and g
+    case.title = f"column collapse, {material}, {h * 1e3:g} mm cells" + (
         f", channel {channel * 1e3:g} mm wide, wall friction {wall_friction:g}"
         if channel is not None else "")
-    return case
+
+    def tables(t: dict) -> None:  # what replaces or removes keys and whole tables
+        solver = t["solver"]
+        if update is not None:
+            solver["velocity_update"] = update
+            solver.pop("flip", None)
+            solver.pop("velocity_relaxation_time", None)
+            if flip is not None:
+                solver["flip"] = flip
+            if relaxation_time is not None:
+                solver["velocity_relaxation_time"] = relaxation_time
+        if material == "nonlocal_mu_i":
+            t["materials"]["beads"].update(type="nonlocal_mu_i",
+                                           nonlocal_amplitude=nonlocal_amplitude,
+                                           fluidity_time=fluidity_time)
+        if separation is not None and material in ("mu_i", "nonlocal_mu_i"):
+            t["materials"]["beads"]["separation"] = separation
+        for bc in t["boundaries"]:
+            if "box" in bc:
+                bc["box"]["hi"][1] = h
+                if bc.get("normal") == "y":
+                    bc["box"]["lo"][1] = h
+        if channel is not None:
+            t["boundaries"] = [bc for bc in t["boundaries"] if bc.get("normal") != "y"]
+            for bc in t["boundaries"]:
+                if "box" in bc:
+                    bc["box"]["hi"][1] = channel / 2
+            t["boundaries"].append(
+                {"type": "friction", "face": "y+", "friction": wall_friction}
+                if wall_friction > 0 else {"type": "roller", "face": "y+"})
+        floor_bc = t["boundaries"][0]
+        assert floor_bc.get("face") == "z-" and floor_bc["type"] == "friction"
+        if floor in ("fixed", "roller"):
+            t["boundaries"][0] = {"type": floor, "face": "z-"}
+        elif floor == "penalty":
+            del t["boundaries"][0]
+            t["grid"]["origin"][2] = -2 * h
+            t["grid"]["cells"][2] += 2
+            t["rigid"] = {"shape": "box", "lo": [-h, -h, -2 * h],
+                          "hi": [X_EXTENT + h, 2 * h, 0.0], "velocity": [0.0, 0.0, 0.0],
+                          "contact": "penalty", "clip_to_grid": True,
+                          "friction": floor_bc["friction"]}
+        if material == "mohr_coulomb":
+            mu = t["materials"]["beads"]
+            t["materials"]["beads"] = {
+                "type": "mohr_coulomb", "density": mu["density"],
+                "youngs_modulus": mu["youngs_modulus"], "poisson_ratio": mu["poisson_ratio"],
+                "friction_angle": friction_angle, "dilation_angle": 0.0}
+
+    return case.edited(tables)
 
 
 def channel_cells(h: float, channel: float, wall_friction: float) -> int:
@@ -179,16 +185,15 @@ def measures(h: dict[str, np.ndarray]) -> dict[str, float]:
 
 def last_points(run: Path) -> np.ndarray:
     """Point positions of the run's last frame [m], (n, 3)."""
-    frames = PVDSeries.load(run / "frames.pvd").entries
-    return read_points_vtu(run / frames[-1][1])[0]
+    return gs.open_result(run).frames()[-1][1].points
 
 
-def point_spacing(case: dict) -> float:
+def point_spacing(case: gs.Case) -> float:
     """Distance between neighbouring points of the column's body [m]: cell / n."""
-    return case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+    return case.grid.cell_size / case.bodies[0].points_per_cell
 
 
-def deposit(run: Path, case: dict) -> tuple[np.ndarray, np.ndarray]:
+def deposit(run: Path, case: gs.Case) -> tuple[np.ndarray, np.ndarray]:
     """Thickness of the last frame's deposit along x (bins one point spacing wide, point
     domains of half-width cell / (2 n)): bin boundaries and thicknesses [m]."""
     x, spacing = last_points(run), point_spacing(case)
@@ -204,12 +209,12 @@ def mass_runouts(run: Path) -> dict[str, float]:
             "runout_mass99": float((q[1] - LENGTH) / LENGTH)}
 
 
-def wall_runouts(run: Path, case: dict) -> dict[str, float]:
+def wall_runouts(run: Path, case: gs.Case) -> dict[str, float]:
     """Front, 3-bead deposit and 99 % mass runouts of the layer of points along a channel's
     wall (centres within one point spacing of it): the deposit a photograph through the
     wall shows."""
     x, spacing = last_points(run), point_spacing(case)
-    wall = x[x[:, 1] > case["bodies"][0]["hi"][1] - spacing]
+    wall = x[x[:, 1] > case.bodies[0].hi[1] - spacing]
     edges, thick = deposit_profile(wall[:, 0], wall[:, 2], spacing / 2, spacing)
     return {"wall_runout": float((wall[:, 0].max() + spacing / 2 - LENGTH) / LENGTH),
             "wall_runout_3d": (front_at_thickness(edges, thick, 3 * BEAD) - LENGTH) / LENGTH,
@@ -220,26 +225,6 @@ def thick_runouts(edges: np.ndarray, thick: np.ndarray) -> dict[str, float]:
     """Runout ratio of the deposit where it is at least 2 and 3 bead diameters thick."""
     return {f"runout_{k}d": (front_at_thickness(edges, thick, k * BEAD) - LENGTH) / LENGTH
             for k in (2, 3)}
-
-
-def run_one(case: dict, out: Path) -> float:
-    """Run the case into out/run unless it is complete there; wall seconds spent."""
-    from grainscale.cli import main as grainscale
-
-    out.mkdir(parents=True, exist_ok=True)
-    hist = out / "run" / "history.csv"
-    if hist.is_file():
-        h = read_history(hist)
-        if h["time"][-1] >= case["time"]["end"] - 1e-9:
-            return float(json.loads((out / "wall.json").read_text())["wall_s"])
-    (out / "case.toml").write_text(tomli_w.dumps(case))
-    t0 = time.perf_counter()
-    code = grainscale(["run", str(out / "case.toml"), "--out", str(out / "run"), "--quiet"])
-    if code:
-        raise SystemExit(f"{out}: grainscale run exited with {code}")
-    wall = time.perf_counter() - t0
-    (out / "wall.json").write_text(json.dumps({"wall_s": wall}))
-    return wall
 
 
 def experiment_bands(ax) -> None:
@@ -356,8 +341,8 @@ def main() -> None:
                            args.floor, args.cfl, args.t_end, args.velocity_update, args.flip,
                            args.relaxation_time, separation, args.nonlocal_amplitude,
                            args.fluidity_time, channel, args.wall_friction)
-            wall = run_one(case, out)
-            h = read_history(out / "run" / "history.csv")
+            wall = run_variant(case, out)
+            h = gs.open_result(out / "run").history
             histories[(mat, mm)] = h
             deposits[(mat, mm)] = deposit(out / "run", case)
             row = {"material": mat, "label": label, "cell_mm": mm, "wall_s": round(wall, 1),

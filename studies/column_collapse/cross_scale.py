@@ -5,9 +5,10 @@ RVE's own measured mu(I).
         [--tiles 1] [--pressures 200 800] [--inertial 0.003 ... 0.8] [--multiscale RUN]
         [--separation reset|recompact]
 
-(a) `grainscale rve flow` on the RVE of the case (default `quick.toml`; same grains,
-    contact law and restitution) at the column's pressure range, fitting mu(I) in the
-    shear-cell measure (DIR/flow.csv, DIR/flow.png, DIR/flow.mu_i.toml);
+(a) grainscale.rve.flow (`grainscale rve flow`) on the RVE of the case (default
+    `quick.toml`; same grains, contact law and restitution) at the column's pressure
+    range, fitting mu(I) in the shear-cell measure (DIR/flow.csv, DIR/flow.png,
+    DIR/flow.mu_i.toml);
 (b) the mu(I) continuum with those parameters in the case's geometry: same grid,
     points, boundaries, velocity update, geostatic stage and output (DIR/continuum);
 (c) the multiscale case itself (DIR/multiscale; or an existing finished run of it given
@@ -41,64 +42,61 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+import grainscale as gs  # noqa: E402
+from grainscale import analysis, rve  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 CASES = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"  # the case files
-sys.path.insert(0, str(HERE))
-from convergence import experiment_bands, mass_runouts, measures, run_one  # noqa: E402
-
-from grainscale.io.history import read_history  # noqa: E402
+sys.path[:0] = [str(HERE), str(HERE.parent)]  # convergence.py; studies/: variants.py
+from convergence import experiment_bands, mass_runouts, measures  # noqa: E402
+from variants import run_variant  # noqa: E402
 
 
 def measure_flow(case: Path, out: Path, tiles: int, pressures: list[float],
                  inertial: list[float]) -> dict:
-    """(a): the fitted [materials.sand] table of the case's RVE."""
-    from grainscale.cli import main as grainscale
-
+    """(a): the fitted [materials.sand] table of the case's RVE (grainscale.rve.flow, as
+    `grainscale rve flow` runs it: DIR/flow.csv, DIR/flow.png, DIR/flow.mu_i.toml)."""
     table = out / "flow.mu_i.toml"
     if not table.is_file():
-        code = grainscale(["rve", "flow", str(case), "--tiles", str(tiles),
-                           "--pressure", *map(str, pressures),
-                           "--inertial", *map(str, inertial), "--material", "sand",
-                           "--out", str(out / "flow.csv"), "--plot", str(out / "flow.png"),
-                           "--quiet"])
-        if code:
-            raise SystemExit(f"grainscale rve flow exited with {code}")
-        if not table.is_file():  # measured, but the points did not determine a law
-            raise SystemExit(f"no mu(I) fit in {out / 'flow.csv'}: see the message above "
+        def say(row: dict) -> None:
+            print(f"P = {row['pressure_target']:.4g} Pa, rate {row['shear_rate']:.4g}/s: "
+                  f"I = {row['I']:.4g}, mu = {row['mu']:.4f} +- {row['mu_err']:.4f}, mu_p = "
+                  f"{row['mu_p']:.4f} +- {row['mu_p_err']:.4f}, porosity "
+                  f"{row['porosity']:.4f}", flush=True)
+
+        res = rve.flow(case, tiles=tiles, pressures=pressures, inertial=inertial,
+                       material="sand", on_point=say, progress=False)
+        analysis.write_columns(out / "flow.csv", res["table"])
+        analysis.plot_flow(out / "flow.png", res["table"], res["fits"],
+                           title=f"rve flow: {case.name}, {tiles}^3 tiles")
+        if res["material"] is None:  # measured, but the points did not determine a law
+            raise SystemExit(f"no mu(I) fit in {out / 'flow.csv'}: {res['fit_error']} "
                              "(--inertial needs at least 3 rates)")
+        table.write_text(res["material"])
     return tomllib.loads(table.read_text())["materials"]["sand"]
 
 
-def continuum_case(path: Path, material: dict, title: str) -> dict:
+def continuum_case(path: Path, material: dict, title: str) -> gs.Case:
     """(b), (d): the case with its DEM material replaced by a mu(I) continuum."""
-    case = tomllib.loads(path.read_text())
-    del case["rve"]
-    case["materials"] = {"sand": material}
-    case["title"] = f"column collapse, a = 0.6, {title}"
-    case["output"]["checkpoint_every"] = 0
-    dem_only = {"porosity", "coordination", "mean_rotation"}
-    case["output"]["history"] = [c for c in case["output"]["history"] if c not in dem_only]
-    return case
+    return gs.load_case(path).continuum_twin(material, f"column collapse, a = 0.6, {title}")
 
 
 def run_multiscale(path: Path, out: Path, given: Path | None) -> Path:
     """(c): the run directory of the multiscale column."""
-    case = tomllib.loads(path.read_text())
+    case = gs.load_case(path)
     if given is not None:
-        hist = read_history(given / "history.csv")
-        end = case["time"]["end"]
-        if hist["time"][-1] < end - 1e-9:
+        ran = gs.open_result(given)
+        end = case.time.end
+        if ran.history["time"][-1] < end - 1e-9:
             raise SystemExit(f"--multiscale {given}: the run has not reached t = {end} s")
-        resolved = given / "case.resolved.toml"
-        if resolved.is_file():
-            ran = tomllib.loads(resolved.read_text())
-            keys = ("cell_size", "cells")
-            if any(ran["grid"][k] != case["grid"][k] for k in keys):
+        if (given / "case.resolved.toml").is_file():
+            grid = ran.case.grid
+            if (grid.cell_size, grid.cells) != (case.grid.cell_size, case.grid.cells):
                 raise SystemExit(f"--multiscale {given}: its grid is not {path.name}'s "
-                                 f"({[ran['grid'][k] for k in keys]} against "
-                                 f"{[case['grid'][k] for k in keys]})")
+                                 f"({[grid.cell_size, list(grid.cells)]} against "
+                                 f"{[case.grid.cell_size, list(case.grid.cells)]})")
         return given
-    run_one(case, out / "multiscale")
+    run_variant(case, out / "multiscale")
     return out / "multiscale" / "run"
 
 
@@ -148,19 +146,20 @@ def main() -> None:
           f"I_0 {material['I_0']} ({time.perf_counter() - t0:.0f} s)", flush=True)
     sep = {"separation": args.separation} if args.separation else {}
     suffix = f"_{args.separation}" if args.separation else ""
-    wall_c = run_one(continuum_case(args.case, material | sep, "mu(I) fitted to its RVE"),
+    wall_c = run_variant(continuum_case(args.case, material | sep, "mu(I) fitted to its RVE"),
                      args.out / f"continuum{suffix}")
     print(f"(b) continuum run: {wall_c:.0f} s", flush=True)
     ms = run_multiscale(args.case, args.out, args.multiscale)
-    beads = tomllib.loads((CASES / "mu_i.toml").read_text())["materials"]["beads"]
-    wall_b = run_one(continuum_case(args.case, beads | sep, "glass-bead mu(I) of mu_i.toml"),
+    beads = gs.load_case(CASES / "mu_i.toml").materials["beads"].model_dump(
+        mode="json", exclude_unset=True)
+    wall_b = run_variant(continuum_case(args.case, beads | sep, "glass-bead mu(I) of mu_i.toml"),
                      args.out / f"baseline{suffix}")
     print(f"(d) glass-bead baseline run: {wall_b:.0f} s", flush=True)
-    hs = {f"multiscale ({args.case.name})": read_history(ms / "history.csv"),
+    hs = {f"multiscale ({args.case.name})": gs.open_result(ms).history,
           "mu(I) continuum, fitted to the RVE":
-              read_history(args.out / f"continuum{suffix}" / "run" / "history.csv"),
+              gs.open_result(args.out / f"continuum{suffix}" / "run").history,
           "glass-bead mu(I) (mu_i.toml)":
-              read_history(args.out / f"baseline{suffix}" / "run" / "history.csv")}
+              gs.open_result(args.out / f"baseline{suffix}" / "run").history}
     plot(hs, args.out / f"cross_scale{suffix}.png", args.case.name)
     m_ms, m_c, m_b = (measures(h) for h in hs.values())
     mass_ms, mass_c = (mass_runouts(r) for r in (ms, args.out / f"continuum{suffix}" / "run"))

@@ -30,6 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+import grainscale as gs
+from grainscale import blocks, rve
+from grainscale.analysis import read_frame
+
 TAU_C = 0.0782  # s, sqrt(H_i / g) of the seed's column
 
 
@@ -45,11 +49,9 @@ def degrees(x) -> float:
 
 
 def frames(out: Path) -> None:
-    from grainscale.io.vtk import read_points_vtu
-
     print("frame  flowing: n  phi_mob quartiles [deg]   resting: n  phi_mob quartiles")
     for f in sorted(glob.glob(str(out / "frames" / "frame_*.vtu"))):
-        _, d = read_points_vtu(f)
+        _, d = read_frame(f)
         phi = mobilised(d["stress"].reshape(-1, 3, 3))
         v = np.linalg.norm(d["velocity"], axis=1)
         row = [Path(f).stem[-5:]]
@@ -61,59 +63,61 @@ def frames(out: Path) -> None:
 
 
 def record(case: Path, out: Path, until: float) -> None:
-    import tomli_w
-
-    import grainscale.coupling.driver as driver
-    from grainscale.coupling import rve_material
-    from grainscale.dem.state import state_arrays
-
-    cfg = tomllib.loads(case.read_text())
-    cfg["time"]["end"] = until * TAU_C
-    cfg.setdefault("output", {})["checkpoint_every"] = 0
-    for m in cfg.get("materials", {}).values():
-        if m.get("type") == "dem" and m.get("packings"):
-            m["packings"] = [str((case.parent / p).resolve()) for p in m["packings"]]
+    """Run CASE (its one material an RVE material owning every point, released at t = 0
+    after a stage at t < 0) to `until` tau_c, recording from the steps gs.run's on_step
+    reports: per step that starts at t >= 0 its dH, dt, the points' stress after it and
+    its start time; the RVEs as the first such step starts (after the last step before
+    release)."""
+    cfg = gs.load_case(case)
+    if cfg.time.start >= 0:
+        raise SystemExit(f"{case}: time.start = {cfg.time.start}: record needs a stage "
+                         "before the release at t = 0 (the RVEs are taken as it ends)")
+    cfg.time.end = until * TAU_C
+    cfg.output.checkpoint_every = 0
+    for m in cfg.materials.values():  # out/case.toml stays valid away from CASE's folder
+        if m.type == "dem" and m.packings:
+            m.packings = [str((case.parent / p).resolve()) for p in m.packings]
     out.mkdir(parents=True, exist_ok=True)
-    short = out / "case.toml"
-    short.write_text(tomli_w.dumps(cfg))
-    now = {"t": None}
+    cfg.save(out / "case.toml")
     rec = {"dH": [], "dt": [], "sig": [], "t": []}
     snap = {}
-    step, update = driver.step, rve_material.RVEMaterial.update
+    now = {"t": cfg.time.start}  # when the coming step starts: the last step's end
 
-    def timed_step(s, dt):
-        now["t"] = s.time
-        return step(s, dt)
-
-    def recording_update(self, dH, dt, stress):
-        released = now["t"] is not None and now["t"] >= 0
-        if released and not snap:
-            if len(self.groups) > 1:
+    def on_step(s: blocks.MPMState) -> None:
+        start, now["t"] = now["t"], s.time
+        if s.time >= 0 and not snap:  # the next step is the first after release
+            material = s.materials[0]
+            if len(material.groups) > 1:
                 raise RuntimeError("cells were retiled before release; record with "
                                    "retile_width = 0")
-            snap.update(state_arrays(self.groups[0].copy()), dt_crit=self.dt_crit)
-        update(self, dH, dt, stress)
-        if released:
-            for key, v in (("dH", dH.copy()), ("dt", dt), ("sig", stress.copy()),
-                           ("t", now["t"])):
+            snap.update(blocks.state_arrays(material.groups[0].copy()),
+                        dt_crit=material.dt_crit)
+        if start >= 0:  # (the material owns every point: its stresses are the points')
+            for key, v in (("dH", s.dH.copy()), ("dt", s.last_dt),
+                           ("sig", s.points.stress.copy()), ("t", start)):
                 rec[key].append(v)
 
-    driver.step, rve_material.RVEMaterial.update = timed_step, recording_update
-    driver.run_case(short, out, checkpoint_every=0)
+    try:
+        gs.run(cfg, out, checkpoint_every=0, progress=False, on_step=on_step)
+    except gs.RunError as err:  # what was recorded up to the error is kept
+        print(f"{err}: recorded up to it")
     np.savez(out / "record.npz", **{k: np.array(v) for k, v in rec.items()})
     np.savez(out / "snapshot.npz", **snap)
     print(f"recorded {len(rec['dt'])} steps after release into {out}")
 
 
 def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
-    from grainscale.config.rve import RVEParams
-    from grainscale.coupling.rve_material import RVEMaterial
-    from grainscale.dem.state import STATE_FIELDS, from_packing, from_state_arrays
-    from grainscale.mpm.step import SimulationError
+    from grainscale.blocks import (
+        STATE_FIELDS,
+        RVEMaterial,
+        SimulationError,
+        from_packing,
+        from_state_arrays,
+    )
 
     rec = np.load(out / "record.npz")
     snap = dict(np.load(out / "snapshot.npz"))
-    params = RVEParams(**tomllib.loads((out / "case.toml").read_text())["rve"])
+    params = rve.load(out / "case.toml").rve
     dH, dts, sig_run, t = rec["dH"], rec["dt"], rec["sig"], rec["t"]
     window = t > 0.5 * TAU_C
     sym = 0.5 * (dH + np.swapaxes(dH, 2, 3))

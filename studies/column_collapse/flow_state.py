@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grainscale.io.vtk import PVDSeries, read_points_vtu
+import grainscale as gs
 
 TAU_C = math.sqrt(0.06 / 9.81)  # s, the column's H_i = 60 mm
 
@@ -52,10 +52,10 @@ def main() -> None:
         print(run)
         print(f"{'t/tau_c':>8} {'front':>6} {'flowing':>7} {'p<1Pa':>6} {'p':>6} "
               f"{'sqrtJ2/p':>8} {'eps_v':>6} {'porosity':>8}")
-        for t, name in PVDSeries.load(run / "frames.pvd").entries:
+        for t, mesh in gs.open_result(run).frames():
             if t < 0:
                 continue
-            r = frame_state(*read_points_vtu(run / name), args.speed)
+            r = frame_state(mesh.points, mesh.point_data, args.speed)
             if not r["flowing"]:
                 print(f"{t / TAU_C:8.2f} {r['front']:6.3f} {0:7d}")
                 continue

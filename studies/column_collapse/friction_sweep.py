@@ -14,11 +14,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
-from convergence import case_at, measures, run_one, variant
+import grainscale as gs
 
-from grainscale.io.history import read_history
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]  # convergence.py; studies/: variants.py
+from convergence import case_at, measures, variant  # noqa: E402
+from variants import run_variant  # noqa: E402
 
 
 def main() -> None:
@@ -33,9 +37,9 @@ def main() -> None:
     for phi in args.angles:
         out = args.out / (f"mc_{phi:g}deg_{args.cell:g}mm"
                           + variant(2, "friction", 0.5, 7.0, args.velocity_update))
-        wall = run_one(case_at(args.cell * 1e-3, "mohr_coulomb", phi,
-                               update=args.velocity_update), out)
-        m = measures(read_history(out / "run" / "history.csv"))
+        wall = run_variant(case_at(args.cell * 1e-3, "mohr_coulomb", phi,
+                                   update=args.velocity_update), out)
+        m = measures(gs.open_result(out / "run").history)
         rows[f"{phi:g}"] = round(m["runout"], 4)
         print(f"phi {phi:4g} deg, {args.cell:g} mm: runout {m['runout']:.3f}, H_f/H_i "
               f"{m['height_ratio']:.3f}, front stops at {m['front_stop_t_over_tc']:.2f} "

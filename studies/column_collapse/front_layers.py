@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grainscale.io.vtk import PVDSeries, read_points_vtu
+import grainscale as gs
 
 TAU_C = math.sqrt(0.06 / 9.81)  # s, the column's H_i = 60 mm
 
@@ -30,10 +30,10 @@ def main() -> None:
     ap.add_argument("--length", type=float, default=0.02, help="m behind the front")
     ap.add_argument("--layers", type=int, default=6, help="layers shown, from the floor")
     args = ap.parse_args()
-    for t, name in PVDSeries.load(args.run / "frames.pvd").entries:
+    for t, mesh in gs.open_result(args.run).frames():
         if t < 0:
             continue
-        x, f = read_points_vtu(args.run / name)
+        x, f = mesh.points, mesh.point_data
         front = float(x[:, 0].max())
         sel = x[:, 0] > front - args.length
         z, vx, free = x[sel, 2], f["velocity"][sel, 0], f["p"][sel] < 1.0

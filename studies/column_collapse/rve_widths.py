@@ -17,10 +17,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from grainscale.coupling.checkpoints import MANIFEST
-from grainscale.dem.cell import perpendicular_widths
-from grainscale.io.checkpoint import read_checkpoint
-from grainscale.stress import p_q
+from grainscale.analysis import p_q
+from grainscale.blocks import latest_checkpoint, perpendicular_widths
 
 
 def main() -> None:
@@ -28,9 +26,9 @@ def main() -> None:
     ap.add_argument("out", type=Path, help="output folder of a run with checkpoints")
     ap.add_argument("--min-p", type=float, default=20.0, help="Pa: RVEs below are skipped")
     args = ap.parse_args()
-    _, attrs = read_checkpoint(args.out / MANIFEST)
+    attrs, parts = latest_checkpoint(args.out)
     x, width, aspect, stretch, p, q = [], [], [], [], [], []
-    for part in sorted((args.out / str(attrs["parts"])).glob("rank_*.h5")):
+    for part in parts:
         with h5py.File(part) as f:
             pts, rve = f["points"], f["material_0"]
             for k, h in enumerate(rve["rve_h"][()]):

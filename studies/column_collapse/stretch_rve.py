@@ -14,18 +14,19 @@ PACKING.h5: a packing of the case, e.g. OUT/packings/sand_0.h5 of a quick-column
 from __future__ import annotations
 
 import argparse
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from grainscale.config.rve import RVEParams
-from grainscale.coupling.rve_material import RVEMaterial
-from grainscale.dem.cell import perpendicular_widths
-from grainscale.dem.state import from_packing
-from grainscale.io.rve_h5 import read_rve_state
-from grainscale.mpm.step import SimulationError
-from grainscale.stress import p_q
+from grainscale import rve
+from grainscale.analysis import p_q
+from grainscale.blocks import (
+    RVEMaterial,
+    SimulationError,
+    from_packing,
+    perpendicular_widths,
+    read_rve_state,
+)
 
 CASES = Path(__file__).resolve().parents[2] / "examples" / "column_collapse"  # the case files
 
@@ -55,7 +56,7 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=5.0, help="1/s")
     ap.add_argument("--max-stretch", type=float, default=4.5)
     args = ap.parse_args()
-    params = RVEParams(**tomllib.loads(args.case.read_text())["rve"])
+    params = rve.load(args.case).rve  # the case's validated RVEParams
     b, _ = read_rve_state(args.packing)
     h, r = b.h[0], b.radius[0]
     x = b.s[0] @ h.T

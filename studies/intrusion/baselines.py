@@ -27,14 +27,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import time
-import tomllib
+import sys
 from pathlib import Path
 
-import tomli_w
 from reshape import add_args, check_args, reshape, to_depth
 
-CASES = Path(__file__).resolve().parents[2] / "examples" / "intrusion"  # the case files
+import grainscale as gs
+
+STUDIES = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(STUDIES))  # studies/variants.py
+from variants import run_variant  # noqa: E402
+
+CASES = STUDIES.parent / "examples" / "intrusion"  # the case files
 DENSITY = 1600.0  # kg/m3: grains of 2650 kg/m3 at porosity 0.397 (seed §4.3)
 YOUNG = 10e6  # Pa: the RVE's drained secant modulus to ~7e-4 strain at 10 kPa (validation §3)
 NU = 0.3
@@ -52,35 +56,13 @@ def continuum(material: str, phi: float, young: float = YOUNG) -> dict:
             "grain_density": 2650.0}
 
 
-def baseline_case(path: Path, material: str, phi: float, young: float = YOUNG) -> dict:
-    case = tomllib.loads(path.read_text())
-    for key in ("rve", "triaxial"):
-        case.pop(key, None)
-    case["materials"] = {"sand": continuum(material, phi, young)}
-    case["title"] = f"{case['title']}: {material} baseline, phi = {phi:g} deg"
-    out = case["output"]
-    out.pop("probes", None)
-    out["checkpoint_every"] = 0
-    out["history"] = [c for c in out["history"]
-                      if c not in ("porosity", "coordination", "mean_rotation")]
-    return case
-
-
-def run(case: dict, out: Path) -> float:
-    from grainscale.cli import main as grainscale
-
-    out.mkdir(parents=True, exist_ok=True)
-    done = out / "wall.json"
-    if done.is_file():
-        return float(json.loads(done.read_text())["wall_s"])
-    (out / "case.toml").write_text(tomli_w.dumps(case))
-    t0 = time.perf_counter()
-    code = grainscale(["run", str(out / "case.toml"), "--out", str(out / "run"), "--quiet"])
-    if code:
-        raise SystemExit(f"{out}: grainscale run exited with {code}")
-    wall = time.perf_counter() - t0
-    done.write_text(json.dumps({"wall_s": wall}))
-    return wall
+def baseline_case(path: Path, material: str, phi: float, young: float = YOUNG) -> gs.Case:
+    """The case file's continuum twin: its DEM material replaced by `continuum(material,
+    phi, young)`; the [rve] and element-test tables, the probes, the DEM history columns
+    and the checkpoints dropped (gs.Case.continuum_twin)."""
+    case = gs.load_case(path)
+    return case.continuum_twin(continuum(material, phi, young),
+                               title=f"{case.title}: {material} baseline, phi = {phi:g} deg")
 
 
 def main() -> None:
@@ -116,7 +98,7 @@ def main() -> None:
     runs = {}
     for (path, material), case in cases.items():
         out = args.out / f"{material}_{path.stem}"
-        wall = run(case, out)
+        wall = run_variant(case, out)
         print(f"{material} {path.name}: {out / 'run'} ({wall:.0f} s)", flush=True)
         runs[f"{material}_{path.stem}"] = {"run": str(out / "run"), "wall_s": round(wall)}
     print(json.dumps({"phi_deg": phi, "runs": runs}))

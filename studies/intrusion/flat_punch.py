@@ -25,12 +25,17 @@ import time
 
 import numpy as np
 
-from grainscale.mpm import boundary
-from grainscale.mpm.grid import Grid
-from grainscale.mpm.materials import LinearElastic
-from grainscale.mpm.points import fill_box, make_points
-from grainscale.mpm.rigid import CYLINDER, RigidBody
-from grainscale.mpm.step import MPMState, step
+from grainscale.blocks import (
+    CYLINDER,
+    Grid,
+    LinearElastic,
+    MPMState,
+    RigidBody,
+    boundary,
+    fill_box,
+    make_points,
+    step,
+)
 
 RADIUS, E, NU, RHO = 0.25, 1e6, 0.3, 1000.0
 

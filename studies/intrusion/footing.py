@@ -47,12 +47,18 @@ import time
 
 import numpy as np
 
-from grainscale.mpm import boundary
-from grainscale.mpm.grid import Grid
-from grainscale.mpm.materials import MohrCoulomb
-from grainscale.mpm.points import fill_box, make_points
-from grainscale.mpm.rigid import BOX, RigidBody
-from grainscale.mpm.step import MPMState, SimulationError, step
+from grainscale.blocks import (
+    BOX,
+    Grid,
+    MohrCoulomb,
+    MPMState,
+    RigidBody,
+    SimulationError,
+    boundary,
+    fill_box,
+    make_points,
+    step,
+)
 
 HALF = 0.5  # m: half-width b of the footing (B = 1 m)
 RHO, E, NU = 1600.0, 10e6, 0.3  # the intrusion twins' bed (baselines.py)

@@ -38,12 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grainscale.config.case import load_rve_case
-from grainscale.coupling.materials import cached_packing
-from grainscale.dem import element_tests, engine
-from grainscale.dem.generate import contact_params
-from grainscale.dem.state import concatenate
-from grainscale.io.packing import load_packing
+from grainscale import rve
 
 AXES = {"x": 0, "y": 1, "z": 2}
 # two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
@@ -87,27 +82,27 @@ def run_packings(run: Path) -> list[tuple[Path, float | None]]:
     return out
 
 
-def realisations(params, n: int, folder: Path) -> list[Path]:
-    """n packings of the [rve] recipe with seeds seed .. seed + n - 1 (the first ones are
-    a run's library), cached in folder."""
+def realisations(case, n: int, folder: Path) -> list[Path]:
+    """n packings of the case's [rve] recipe with seeds seed .. seed + n - 1 (the first
+    ones are a run's library), cached in folder."""
     paths = [folder / f"packing_{k}.h5" for k in range(n)]
     for k, path in enumerate(paths):
-        cached_packing(params, k, path, progress=True)
+        rve.generate(case, seed=case.rve.seed + k, path=path)
     return paths
 
 
-def steady_angles(paths: list[Path], params, test, axes: list[str], start: float):
+def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
     """Steady and peak angles [deg], arrays (packings, axes), of the packings tested
-    together as one batch per axis at test.confining_pressure."""
-    batch = concatenate([load_packing(p, params) for p in paths])
+    together as one batch per axis, with the [triaxial] table `test` (its confining
+    pressure) and the case's [rve] contact law."""
+    batch = rve.packing(case, paths)
     steady = np.empty((len(paths), len(axes)))
     peak = np.empty_like(steady)
     for j, axis in enumerate(axes):
-        b = batch.copy()
-        engine.refresh(b, contact_params(params))
-        per_rve = element_tests.triaxial(b, params, test.model_copy(update={"axis": axis}),
-                                         every_rve=True)
-        for i, rows in enumerate(per_rve):
+        along = case.model_copy(update={"triaxial": test.model_copy(update={"axis": axis})})
+        curves = rve.triaxial(along, batch, progress=False, per_rve=True)
+        for i, curve in enumerate(curves):
+            rows = rve.rows_of(curve)
             phi = mobilised_angle(rows, axis)
             window = np.array([r["axial_strain"] for r in rows]) >= start
             if window.sum() < 5:
@@ -141,12 +136,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("give either RUN or --realisations N")
     if args.realisations is not None and args.realisations < 1:
         ap.error(f"--realisations = {args.realisations}: must be at least 1")
-    case = load_rve_case(args.case)
+    case = rve.load(args.case)
     if case.triaxial is None:
         raise SystemExit(f"{args.case}: no [triaxial] table (confining pressure, rate, strain)")
     if args.realisations is not None:
         folder = args.out.with_name(f"{args.out.stem}_packings")
-        tested = [(p, None) for p in realisations(case.rve, args.realisations, folder)]
+        tested = [(p, None) for p in realisations(case, args.realisations, folder)]
         what = f"{args.realisations} packings of the [rve] recipe (seeds {case.rve.seed}..)"
     else:
         tested = run_packings(args.run)
@@ -160,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"triaxial at {pressure:g} Pa: {len(idx)} packing(s) x axes {args.axes}",
               file=sys.stderr, flush=True)
         test = case.triaxial.model_copy(update={"confining_pressure": pressure})
-        steady[idx], peak[idx] = steady_angles([tested[i][0] for i in idx], case.rve, test,
+        steady[idx], peak[idx] = steady_angles([tested[i][0] for i in idx], case, test,
                                                args.axes, args.start)
     phi, band = summary(steady.mean(axis=1))
     peak_mean, peak_band = summary(peak.mean(axis=1))

@@ -24,14 +24,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import tomllib
+import sys
 from pathlib import Path
 
-from analyse import analyse, table
-from baselines import run
 from reshape import reshape
 
-CASES = Path(__file__).resolve().parents[2] / "examples" / "intrusion"  # the case files
+import grainscale as gs
+
+STUDIES = Path(__file__).resolve().parents[1]
+CASES = STUDIES.parent / "examples" / "intrusion"  # the case files, and analyse.py
+sys.path[:0] = [str(STUDIES), str(CASES)]  # studies/variants.py, examples/intrusion/analyse.py
+from analyse import analyse, table  # noqa: E402
+from variants import run_variant  # noqa: E402
+
 PHI = 30.0  # deg, mohr_coulomb.toml's friction angle
 
 VARIANTS = {
@@ -46,14 +51,13 @@ VARIANTS = {
 
 
 def variant_case(width: float = 2.5, depth: float = 2.0, cell: float = 0.125,
-                 contact: str | None = None, friction: float = 0.0) -> dict:
+                 contact: str | None = None, friction: float = 0.0) -> gs.Case:
     """mohr_coulomb.toml on a width x width quarter of a bed `depth` deep [m], cells of
     `cell` m, and the intruder's contact (default: the file's)."""
-    case = reshape(tomllib.loads((CASES / "mohr_coulomb.toml").read_text()), cell,
-                   width=width, depth=depth)
+    case = reshape(gs.load_case(CASES / "mohr_coulomb.toml"), cell, width=width, depth=depth)
     if contact is not None:
-        case["rigid"]["contact"] = contact
-        case["rigid"]["friction"] = friction
+        case.rigid.contact = contact
+        case.rigid.friction = friction
     return case
 
 
@@ -66,7 +70,7 @@ def main() -> None:
     args = ap.parse_args()
     walls = {}
     for name in args.variants:
-        walls[name] = run(variant_case(**VARIANTS[name]), args.out / name)
+        walls[name] = run_variant(variant_case(**VARIANTS[name]), args.out / name)
         print(f"{name}: {walls[name]:.0f} s", flush=True)
     summary = analyse([args.out / v for v in args.variants], PHI,
                       png=args.out / "mc_variants.png")

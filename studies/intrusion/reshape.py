@@ -17,59 +17,65 @@ from __future__ import annotations
 
 import argparse
 import math
-import tomllib
 from pathlib import Path
 
-import tomli_w
+import grainscale as gs
 
 ABOVE = 1.25  # m of grid above the bed's surface (room for the intruder)
 
 
-def reshape(case: dict, cell: float | None = None, points_per_cell: int | None = None,
-            width: float | None = None, depth: float | None = None) -> dict:
+def reshape(case: gs.Case, cell: float | None = None, points_per_cell: int | None = None,
+            width: float | None = None, depth: float | None = None) -> gs.Case:
     """The intrusion case on cells of `cell` m with `points_per_cell`^3 points a cell, a
     width x width quarter of a bed `depth` deep [m] (each default: the case's own), the
     intruder's base and the probes kept at their depth below the bed's surface. Changes
-    `case` in place and returns it."""
-    body, grid, rigid = case["bodies"][0], case["grid"], case["rigid"]
-    cell = grid["cell_size"] if cell is None else cell
-    width = body["hi"][0] if width is None else width
-    lift = 0.0 if depth is None else depth - body["hi"][2]
-    depth = body["hi"][2] + lift
-    grid["cell_size"] = cell
-    grid["cells"] = [round(width / cell), round(width / cell), round((depth + ABOVE) / cell)]
-    body["hi"] = [width, width, depth]
+    `case` in place (each edit validated) and returns it."""
+    body, rigid = case.bodies[0], case.rigid
+    cell = case.grid.cell_size if cell is None else cell
+    width = body.hi[0] if width is None else width
+    lift = 0.0 if depth is None else depth - body.hi[2]
+    depth = body.hi[2] + lift
+    case.grid.cell_size = cell
+    case.grid.cells = [round(width / cell), round(width / cell), round((depth + ABOVE) / cell)]
+    body.hi = [width, width, depth]
     if points_per_cell is not None:
-        body["points_per_cell"] = points_per_cell
+        body.points_per_cell = points_per_cell
     for key in ("center", "lo", "hi"):
-        if key in rigid:
-            rigid[key][2] += lift
-    for probe in case.get("output", {}).get("probes", []):
-        probe["position"][2] += lift
+        if getattr(rigid, key, None) is not None:
+            x, y, z = getattr(rigid, key)
+            setattr(rigid, key, [x, y, z + lift])
+    for probe in case.output.probes:
+        x, y, z = probe.position
+        probe.position = [x, y, z + lift]
     return case
 
 
-def end_time_for(case: dict, depth_over_r: float) -> float:
-    """time.end [s] at which the intruder, ramped linearly from start_time to its
-    velocity over ramp_time and steady after, has gone depth_over_r x R deep."""
-    rigid = case["rigid"]
-    speed = math.hypot(*rigid["velocity"])
-    ramp, start = rigid.get("ramp_time", 0.0), rigid.get("start_time", 0.0)
-    depth = depth_over_r * rigid["radius"]
+def end_time_for(case: gs.Case, depth_over_r: float) -> float:
+    """time.end [s] at which the intruder, ramped linearly from start_time (default
+    time.start) to its velocity over ramp_time and steady after, has gone
+    depth_over_r x R deep."""
+    rigid = case.rigid
+    speed = math.hypot(*rigid.velocity)
+    ramp = rigid.ramp_time
+    start = case.time.start if rigid.start_time is None else rigid.start_time
+    depth = depth_over_r * rigid.radius
     if depth <= speed * ramp / 2:
         return start + (2 * depth * ramp / speed) ** 0.5
     return start + ramp / 2 + depth / speed
 
 
-def to_depth(case: dict, depth_over_r: float) -> dict:
+def to_depth(case: gs.Case, depth_over_r: float) -> gs.Case:
     """End the case when the intruder is depth_over_r radii deep (in place); SystemExit
     naming --to-depth where that is not inside the bed."""
-    bed, radius = case["bodies"][0]["hi"][2], case["rigid"]["radius"]
+    bed, radius = case.bodies[0].hi[2], getattr(case.rigid, "radius", None)
+    if radius is None:
+        raise SystemExit(f"--to-depth {depth_over_r}: d/R needs a cylinder's radius; the "
+                         f"intruder of {case.title!r} is a {case.rigid.shape}")
     if not 0.0 < depth_over_r * radius < bed:
         raise SystemExit(f"--to-depth {depth_over_r}: valid 0 < d/R < {bed / radius:g} "
                          "(the bed's depth over R)")
-    case["time"]["end"] = end_time_for(case, depth_over_r)
-    case["title"] += f", to d/R = {depth_over_r:g}"
+    case.time.end = end_time_for(case, depth_over_r)
+    case.title += f", to d/R = {depth_over_r:g}"
     return case
 
 
@@ -102,14 +108,17 @@ def main() -> None:
     check_args(args.cell_size, args.points_per_cell, args.quarter)
     if args.out.exists():
         raise SystemExit(f"--out {args.out}: exists; not overwritten")
-    case = tomllib.loads(args.case.read_text())
+    try:
+        case = gs.load_case(args.case)
+    except gs.ConfigError as err:
+        raise SystemExit(f"{args.case}: {err}") from None
     width, depth = args.quarter if args.quarter is not None else (None, None)
     reshape(case, args.cell_size, args.points_per_cell, width, depth)
     if args.to_depth is not None:
         to_depth(case, args.to_depth)
     if args.quarter is not None:
-        case["title"] += f" in a {width:g} x {width:g} m quarter of a {depth:g} m bed"
-    args.out.write_text(tomli_w.dumps(case))
+        case.title += f" in a {width:g} x {width:g} m quarter of a {depth:g} m bed"
+    case.check().save(args.out)
     print(args.out)
 
 

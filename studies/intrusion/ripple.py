@@ -21,12 +21,18 @@ import time
 
 import numpy as np
 
-from grainscale.mpm import boundary
-from grainscale.mpm.grid import Grid
-from grainscale.mpm.materials import LinearElastic, MohrCoulomb
-from grainscale.mpm.points import fill_box, make_points
-from grainscale.mpm.rigid import BOX, RigidBody
-from grainscale.mpm.step import MPMState, step
+from grainscale.blocks import (
+    BOX,
+    Grid,
+    LinearElastic,
+    MohrCoulomb,
+    MPMState,
+    RigidBody,
+    boundary,
+    fill_box,
+    make_points,
+    step,
+)
 
 WIDTH, BED, HALF = 1.0, 0.6, 0.15  # m: bed width and height, strip half-width
 RHO, E, NU = 1600.0, 1e7, 0.3

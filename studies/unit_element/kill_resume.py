@@ -7,7 +7,7 @@ tests/test_kill_resume.py is the CI version on a reduced case).
 
 First the run to --max-steps without a stop (OUT/ref), then the same command into
 OUT/killed, killed in turn at --kills moments spread evenly over the run, each at one of
-the named points of grainscale.io.faults (every phase of the step loop and of the
+the named fault-injection points of the solver (every phase of the step loop and of the
 checkpoint write, in turn: GRAINSCALE_KILL_AT=POINT:N, the Nth time the process gets
 there, N computed from the step the run resumes from, the target step and the reference
 run's row and frame steps), and resumed with --resume after each, a last resume running
@@ -34,10 +34,8 @@ import sys
 import time
 from pathlib import Path
 
-from grainscale.config.base import ConfigError
-from grainscale.coupling import checkpoints
-from grainscale.distributed.comm import Comm
-from grainscale.io import faults
+import grainscale as gs
+from grainscale import blocks
 
 CASES = Path(__file__).resolve().parents[2] / "examples" / "unit_element"  # the case files
 
@@ -71,9 +69,9 @@ def command(case: Path, out: Path, max_steps: int, every: int, ranks: int) -> li
 
 def run(cmd: list[str], kill_at: str | None) -> tuple[bool, int, str]:
     """(killed by SIGKILL, exit code, output)."""
-    env = {k: v for k, v in os.environ.items() if k != faults.ENV}
+    env = {k: v for k, v in os.environ.items() if k != blocks.FAULT_ENV}
     if kill_at:
-        env[faults.ENV] = kill_at
+        env[blocks.FAULT_ENV] = kill_at
     r = subprocess.run(cmd, env=env, capture_output=True, text=True)
     text = r.stdout + r.stderr
     # serial: -9; mpiexec (hydra) ends the job and exits with the signal number
@@ -84,8 +82,8 @@ def run(cmd: list[str], kill_at: str | None) -> tuple[bool, int, str]:
 def newest_step(out: Path) -> int | None:
     try:
         with contextlib.redirect_stderr(io.StringIO()):  # its fallback warning: the run's
-            return int(checkpoints.find(out, Comm(None)).attrs["step"])
-    except ConfigError:
+            return int(blocks.latest_checkpoint(out)[0]["step"])
+    except gs.ConfigError:
         return None
 
 

@@ -16,9 +16,7 @@ import pytest
 from grainscale.analysis import read_columns, unit_element_metrics
 from grainscale.cli import main
 from grainscale.cli.demo import demo_case
-from grainscale.config.case import load_rve_case
-from grainscale.dem.element_tests import triaxial_ensemble
-from grainscale.dem.generate import generate
+from grainscale.rve import triaxial_ensemble
 
 pytestmark = pytest.mark.validation  # minutes: the validation tier
 
@@ -29,8 +27,7 @@ def runs(tmp_path_factory):
     case = out / "case.toml"
     case.write_text(demo_case(particles=300, strain=0.06, rate=0.5))
     assert main(["run", str(case), "--out", str(out / "ms"), "--quiet"]) == 0
-    c = load_rve_case(case)
-    dem = triaxial_ensemble(generate(c.rve), c.rve, c.triaxial, replicas=8)
+    dem = triaxial_ensemble(case, replicas=8, progress=False)
     return dem, read_columns(out / "ms" / "history.csv")
 
 

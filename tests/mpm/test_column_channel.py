@@ -2,8 +2,8 @@
 is the slice's planar flow; with Coulomb walls the layer along the wall runs out less."""
 
 import pytest
-import tomli_w
 
+import grainscale as gs
 from example_scripts import load_example
 from grainscale.cli import main
 
@@ -14,10 +14,10 @@ def _run(tmp_path, name, **channel):
     # mu_i.toml at 10 mm cells: 5-10 s a run
     case = conv.case_at(0.010, "mu_i", 22.0, **channel)
     path = tmp_path / f"{name}.toml"
-    path.write_text(tomli_w.dumps(case))
+    case.save(path)
     out = tmp_path / name
     assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
-    row = conv.measures(conv.read_history(out / "history.csv"))
+    row = conv.measures(gs.open_result(out).history)
     if channel:
         row.update(conv.wall_runouts(out, case))
     return row

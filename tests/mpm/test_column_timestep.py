@@ -8,8 +8,8 @@ import tomllib
 from pathlib import Path
 
 import pytest
-import tomli_w
 
+import grainscale as gs
 from example_scripts import load_example
 from grainscale.cli import main
 
@@ -28,10 +28,10 @@ def _runout(tmp_path, cfl, update, relaxation_time):
     case = conv.case_at(0.005, "mu_i", 22.0, cfl=cfl, update=update,
                         relaxation_time=relaxation_time)
     path = tmp_path / f"case_{update}_{cfl}.toml"
-    path.write_text(tomli_w.dumps(case))
+    case.save(path)
     out = tmp_path / f"out_{update}_{cfl}"
     assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
-    return conv.measures(conv.read_history(out / "history.csv"))
+    return conv.measures(gs.open_result(out).history)
 
 
 def _aflip_runs(tmp_path, relaxation_time):

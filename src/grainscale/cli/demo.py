@@ -156,12 +156,9 @@ def run_demo(out: Path, case_only: bool = False, **reductions) -> int:
         f"{REPLICAS} realisations of it")
     if grainscale(["rve", "triaxial", str(case), "--out", str(out / "dem.csv")]) != 0:
         return 1
-    from grainscale.config.case import load_rve_case
-    from grainscale.dem.element_tests import triaxial_ensemble
-    from grainscale.dem.generate import generate
+    from grainscale import rve
 
-    c = load_rve_case(case)
-    ens = triaxial_ensemble(generate(c.rve), c.rve, c.triaxial, replicas=REPLICAS)
+    ens = rve.triaxial_ensemble(case, replicas=REPLICAS)
     write_columns(out / "dem_ensemble.csv", ens)
     say("3/3 comparison")
     ms = read_columns(out / "multiscale" / "history.csv")

@@ -23,7 +23,7 @@ from grainscale.config.rve import (
 )
 from grainscale.dem import engine, homogenise, lattice
 from grainscale.dem.generate import contact_params
-from grainscale.dem.state import RVEBatch, concatenate
+from grainscale.dem.state import RVEBatch
 
 COLUMN_DOC = (
     "units SI (Pa, s); stresses compression positive (geomechanics): p = -tr(sigma)/3, "
@@ -178,26 +178,3 @@ def simple_shear(batch: RVEBatch, params: RVEParams, test: ShearTest,
         return {"shear_strain": test.strain_rate * t}
 
     return _run(batch, params, ctrl, dt, steps, n_rows, extra, on_row, reduce=True)
-
-
-def triaxial_ensemble(packing: RVEBatch, params: RVEParams, test: TriaxialTest,
-                      replicas: int, seed: int = 0) -> dict[str, np.ndarray]:
-    """Mean stress path of the drained triaxial test over `replicas` copies of one
-    packing whose grain velocities differ by ~1e-9 m/s: chaos makes each a different
-    realisation of the same RVE, as the RVEs of a multiscale run's points become, so this
-    is the like-for-like reference of a multiscale curve (docs/validation.md §1). Also
-    `q_over_p_sem` and `volumetric_strain_sem`: the standard error of those means,
-    std / sqrt(replicas), the realisation noise left in them."""
-    rng = np.random.default_rng(seed)
-    copies = []
-    for _ in range(replicas):
-        b = packing.copy()
-        b.v += rng.normal(0.0, 1e-9, b.v.shape)
-        copies.append(b)
-    per_rve = triaxial(concatenate(copies), params, test, every_rve=True)
-    cols = per_rve[0][0].keys()
-    paths = {k: np.array([[row[k] for row in rows] for rows in per_rve]) for k in cols}
-    out = {k: v.mean(axis=0) for k, v in paths.items()}
-    for k in ("q_over_p", "volumetric_strain"):
-        out[f"{k}_sem"] = paths[k].std(axis=0, ddof=1) / math.sqrt(replicas)
-    return out
