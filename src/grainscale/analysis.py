@@ -25,7 +25,29 @@ from grainscale.theory.archimedes import k_phi, phi_for_k
 
 
 def read_columns(path: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a CSV with '#' comment lines and a header row."""
+    """Columns of a CSV with '#' comment lines and a header row.
+
+    Such as a run's history.csv or the CSV of an RVE test's curve.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The CSV file.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Column name (from the header row) to its values, rows in order.
+
+    Raises
+    ------
+    ValueError
+        If a value is not a number.
+
+    See Also
+    --------
+    write_columns : writes such a CSV.
+    """
     lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
     cols = lines[0].split(",")
     data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]], ndmin=2)
@@ -33,13 +55,40 @@ def read_columns(path: str | Path) -> dict[str, np.ndarray]:
 
 
 def write_columns(path: str | Path, cols: dict[str, np.ndarray]) -> None:
-    """Equal-length columns as a CSV with a header row (what read_columns reads)."""
+    """Equal-length columns as a CSV with a header row (what read_columns reads).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The CSV file to write.
+    cols : dict of str to numpy.ndarray
+        Column name to values, all of one length; written in the dict's order.
+    """
     np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",",
                header=",".join(cols), comments="")
 
 
 def deviation(x_ref, y_ref, x, y, x_max: float, n: int = 501) -> tuple[float, float, float]:
-    """(mean |y - y_ref|, range of y_ref, range of y) over [0, x_max] by interpolation."""
+    """Mean absolute deviation of a curve y(x) from y_ref(x_ref) over [0, x_max].
+
+    Both curves are interpolated linearly onto `n` equally spaced points of [0, x_max].
+
+    Parameters
+    ----------
+    x_ref, y_ref : array_like
+        The reference curve, `x_ref` increasing.
+    x, y : array_like
+        The compared curve, `x` increasing.
+    x_max : float
+        End of the compared range.
+    n : int, default 501
+        Number of interpolation points.
+
+    Returns
+    -------
+    tuple of float
+        (mean |y - y_ref|, range of y_ref, range of y) over [0, x_max].
+    """
     grid = np.linspace(0.0, x_max, n)
     a = np.interp(grid, x_ref, y_ref)
     b = np.interp(grid, x, y)
@@ -47,7 +96,34 @@ def deviation(x_ref, y_ref, x, y, x_max: float, n: int = 501) -> tuple[float, fl
 
 
 def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
-    """Agreement of two stress paths with columns axial_strain, q_over_p, volumetric_strain."""
+    """Agreement of two stress paths with columns axial_strain, q_over_p, volumetric_strain.
+
+    Acceptance (coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute
+    deviation of q/p and of eps_v over the common axial-strain range at most 3 % of each
+    curve's range. If `dem` is a DEM ensemble mean with `q_over_p_sem` and
+    `volumetric_strain_sem` (rve.triaxial_ensemble), the realisation noise is weighed
+    too: chaos alone leaves the difference of two such means normal with std
+    sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi).
+
+    Parameters
+    ----------
+    dem : dict of str to numpy.ndarray
+        The pure-DEM stress path (rve.triaxial's curve or triaxial_ensemble's mean).
+    multiscale : dict of str to numpy.ndarray
+        The multiscale stress path (a run's history).
+
+    Returns
+    -------
+    dict
+        ``axial_strain_compared`` (the common range's end); for q_over_p and
+        volumetric_strain, ``mad_KEY`` and ``mad_KEY_over_dem_range``,
+        ``mad_KEY_over_multiscale_range``; ``peak_q_over_p_dem``,
+        ``peak_q_over_p_multiscale``, ``peak_relative_difference``; ``pass`` (bool,
+        the 3 % acceptance). Against an ensemble also ``noise_KEY_over_dem_range``,
+        ``within_twice_noise`` (each mean deviation within twice the noise) and
+        ``verdict``: "pass", "within realisation noise" (peak within 3 %, each mean
+        deviation within twice the noise) or "fail".
+    """
     x_max = float(min(dem["axial_strain"].max(), multiscale["axial_strain"].max()))
     out = {"axial_strain_compared": x_max}
     for key in ("q_over_p", "volumetric_strain"):
@@ -90,10 +166,39 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
 
 def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
                     spacing: float, base: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Thickness of a layer of points along one axis: bins of width `spacing` [m] from the
-    first point domain's rear edge; in each, the highest point-domain edge above `base`
-    (max of up + lp - base, 0 where a bin holds no point centre). Returns the n + 1 bin
-    boundaries and the n thicknesses [m]."""
+    """Thickness of a layer of points along one axis, such as a collapse's deposit.
+
+    Bins of width `spacing` [m] start at the first point domain's rear edge; in each,
+    the thickness is the highest point-domain edge above `base` (max of up + lp - base,
+    0 where a bin holds no point centre).
+
+    Parameters
+    ----------
+    along : numpy.ndarray
+        The points' coordinates along the axis [m].
+    up : numpy.ndarray
+        Their coordinates upward [m].
+    lp : numpy.ndarray or float
+        The points' domain half-widths [m], one per point or one for all.
+    spacing : float
+        Bin width [m].
+    base : float, default 0.0
+        Height of the floor [m].
+
+    Returns
+    -------
+    edges : numpy.ndarray
+        The n + 1 bin boundaries [m].
+    thickness : numpy.ndarray
+        The n thicknesses [m].
+
+    Examples
+    --------
+    >>> from grainscale import analysis
+    >>> pts, fields = analysis.read_frame("col/frames/frame_00010.vtu")
+    >>> edges, thick = analysis.deposit_profile(pts[:, 0], pts[:, 2], 0.5e-3, 1e-3)
+    >>> analysis.front_at_thickness(edges, thick, 3 * 1.15e-3)
+    """
     lp = np.broadcast_to(np.asarray(lp, dtype=float), along.shape)
     start = float((along - lp).min())
     idx = np.floor((along - start) / spacing).astype(np.int64)
@@ -103,8 +208,22 @@ def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
 
 
 def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float) -> float:
-    """The far boundary [m] of the last bin of a deposit_profile at least `minimum` [m]
-    thick (a front that ignores a tail thinner than `minimum`); NaN if none is."""
+    """The front of a deposit that ignores a tail thinner than `minimum`.
+
+    Parameters
+    ----------
+    edges : numpy.ndarray
+        The n + 1 bin boundaries of a deposit_profile [m].
+    thickness : numpy.ndarray
+        Its n thicknesses [m].
+    minimum : float
+        The least thickness that counts [m].
+
+    Returns
+    -------
+    float
+        The far boundary [m] of the last bin at least `minimum` thick; NaN if none is.
+    """
     thick = np.flatnonzero(thickness >= minimum)
     return float(edges[thick[-1] + 1]) if thick.size else math.nan
 
@@ -112,17 +231,44 @@ def front_at_thickness(edges: np.ndarray, thickness: np.ndarray, minimum: float)
 
 def plot_stress_path(path: str | Path, curves: dict[str, dict], x: str = "axial_strain",
                      title: str = "") -> None:
-    """A PNG of q/p and eps_v against `x` for labelled curves side by side (`curves`:
-    label -> columns {x, "q_over_p", "volumetric_strain"}, e.g. rve.triaxial's curve and
-    a run's history): the plot of `grainscale rve triaxial --plot` and of the demo."""
+    """A PNG of q/p and eps_v against `x` for labelled curves side by side.
+
+    The plot of `grainscale rve triaxial --plot` and of the demo.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The PNG file to write.
+    curves : dict of str to dict
+        Label -> columns {x, "q_over_p", "volumetric_strain"}, e.g. rve.triaxial's curve
+        and a run's history.
+    x : str, default "axial_strain"
+        The column on the horizontal axis.
+    title : str, default ""
+        The figure's title.
+    """
     from grainscale.io.plots import plot_stress_path as plot
 
     plot(path, curves, x=x, title=title)
 
 
 def plot_flow(path: str | Path, table: dict, fits: dict, title: str = "") -> None:
-    """A PNG of rve.flow's result: steady mu against I in both measures with their 95 %
-    bands and fitted laws, and the porosity against I (`grainscale rve flow --plot`)."""
+    """A PNG of rve.flow's result (`grainscale rve flow --plot`).
+
+    Steady mu against I in both measures with their 95 % bands and fitted laws, and the
+    porosity against I.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The PNG file to write.
+    table : dict
+        rve.flow's ``"table"``.
+    fits : dict
+        rve.flow's ``"fits"``.
+    title : str, default ""
+        The figure's title.
+    """
     from grainscale.io.plots import plot_flow as plot
 
     plot(path, table, fits, title=title)

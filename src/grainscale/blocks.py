@@ -39,11 +39,28 @@ from grainscale.mpm.step import MPMState, SimulationError, step
 
 
 def latest_checkpoint(out: str | Path) -> tuple[dict, list[Path]]:
-    """The newest valid checkpoint of a run's folder `out` (checkpoint.h5, else
-    checkpoint.prev.h5; docs/case-files.md, restart): its attributes (step, time, parts,
-    ...) and its per-rank part files (HDF5: group `points` with x, F, ...; group
-    `material_K` with the RVE states rve_h, rve_radius, rve_stress, ...). ConfigError if
-    none is valid."""
+    """The newest valid checkpoint of a run's folder `out`.
+
+    That is checkpoint.h5, else checkpoint.prev.h5 (docs/case-files.md, restart).
+
+    Parameters
+    ----------
+    out : str or pathlib.Path
+        The output folder of the run.
+
+    Returns
+    -------
+    attrs : dict
+        The checkpoint's attributes (step, time, parts, ...).
+    parts : list of pathlib.Path
+        Its per-rank part files, in rank order (HDF5: group `points` with x, F, ...;
+        group `material_K` with the RVE states rve_h, rve_radius, rve_stress, ...).
+
+    Raises
+    ------
+    ConfigError
+        If no checkpoint in `out` is valid.
+    """
     from grainscale.coupling import checkpoints
     from grainscale.distributed.comm import Comm
 

@@ -32,23 +32,77 @@ Curve = dict[str, np.ndarray]
 
 
 def load(path: str | Path) -> RVECase:
-    """The [rve] table and the element-test tables ([triaxial], [undrained], [isotropic],
-    [shear]) of a file: an RVE parameter file or a multiscale case file (docs/case-files.md);
-    ConfigError names a bad key, its value and the valid range."""
+    """The [rve] table and the element-test tables of a file.
+
+    The element-test tables are [triaxial], [undrained], [isotropic] and [shear]; the
+    file is an RVE parameter file or a multiscale case file (docs/case-files.md), whose
+    other tables are validated as a case too.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The TOML file.
+
+    Returns
+    -------
+    RVECase
+        The validated [rve] table and those test tables the file has.
+
+    Raises
+    ------
+    ConfigError
+        Naming a bad key, its value and the valid range (or a missing or non-TOML file).
+
+    Examples
+    --------
+    >>> from grainscale import rve
+    >>> params = rve.load("examples/rve/unit_element.toml")
+    >>> params.triaxial.confining_pressure
+    """
     return load_rve_case(path)
 
 
 def generate(params: RVECase | Case | str | Path, *, seed: int | None = None,
              path: str | Path | None = None,
              progress: bool | Callable[[str], None] = True) -> RVEBatch:
-    """A consolidated packing as [rve] asks (docs/dem.md: generation), ready to load:
-    a batch of one RVE, its contact state refreshed.
+    """A consolidated packing as [rve] asks (docs/dem.md: generation), ready to load.
 
-    seed: the generator's seed (default rve.seed; a multiscale run's packing k has
-    seed rve.seed + k). path: a .h5 file that caches it: read back if it holds the
-    packing of this very recipe and seed, else generated and written there. progress:
-    a status line on stderr after each compaction stage (True), none (False), or each
-    line given to a callable."""
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    seed : int, optional
+        The generator's seed (default rve.seed; a multiscale run's packing k has seed
+        rve.seed + k).
+    path : str or pathlib.Path, optional
+        A .h5 file that caches the packing: read back if it holds the packing of this
+        very recipe and seed, else generated and written there.
+    progress : bool or callable, default True
+        A status line on stderr after each compaction stage (True), none (False), or
+        each line given to a callable ``progress(line)``.
+
+    Returns
+    -------
+    RVEBatch
+        A batch of one RVE, its contact state refreshed.
+
+    Raises
+    ------
+    ConfigError
+        If `path` does not end in .h5, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+
+    Examples
+    --------
+    >>> from grainscale import rve
+    >>> params = rve.load("examples/rve/unit_element.toml")
+    >>> start = rve.generate(params, progress=False)
+    >>> start.porosity()
+    >>> cached = rve.generate(params, seed=3, path="packing_3.h5")
+    """
     case = _case(params)
     rve = case.rve if seed is None else case.rve.model_copy(update={"seed": int(seed)})
     if path is not None:
@@ -71,9 +125,31 @@ def generate(params: RVECase | Case | str | Path, *, seed: int | None = None,
 
 def packing(params: RVECase | Case | str | Path,
             path: str | Path | Sequence[str | Path]) -> RVEBatch:
-    """A packing file (.txt exchange format or .h5 state) with the contact law of
-    `params`, its contact state refreshed: the start of a test instead of generate().
-    A list of files gives one batch of as many RVEs, tested together (per_rve)."""
+    """A packing file with the contact law of `params`: the start of a test instead of
+    generate().
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    path : str or pathlib.Path or sequence of them
+        A packing file (.txt exchange format or .h5 state). A list of files gives one
+        batch of as many RVEs, tested together (``per_rve``).
+
+    Returns
+    -------
+    RVEBatch
+        The packing(s), contact state refreshed.
+
+    Raises
+    ------
+    ConfigError
+        If a file does not exist, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+    """
     case = _case(params)
     paths = [path] if isinstance(path, (str, Path)) else list(path)
     for p in paths:
@@ -85,9 +161,33 @@ def packing(params: RVECase | Case | str | Path,
 
 
 def save(params: RVECase | Case | str | Path, batch: RVEBatch, path: str | Path) -> Path:
-    """Write RVE 0 of `batch` as `grainscale rve generate --out` does: .h5 (the full
-    state and the [rve] recipe, what a case's `packings` and packing() read back exactly)
-    or .txt (the exchange format: cell, centres, radii)."""
+    """Write RVE 0 of `batch` as `grainscale rve generate --out` does.
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+        Its [rve] table is the recipe written into a .h5 file.
+    batch : RVEBatch
+        The packing; only its RVE 0 is written.
+    path : str or pathlib.Path
+        The file: .h5 (the full state and the [rve] recipe, what a case's `packings` and
+        packing() read back exactly) or .txt (the exchange format: cell, centres, radii).
+
+    Returns
+    -------
+    pathlib.Path
+        `path`.
+
+    Raises
+    ------
+    ConfigError
+        If `path` ends in neither .h5 nor .txt, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+    """
     case = _case(params)
     path = Path(path)
     if path.suffix == ".h5":
@@ -102,12 +202,49 @@ def save(params: RVECase | Case | str | Path, batch: RVEBatch, path: str | Path)
 def triaxial(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
              on_row: Callable[[dict], None] | None = None, *, progress: bool = True,
              per_rve: bool = False) -> Curve | list[Curve]:
-    """Drained triaxial compression ([triaxial]: lateral stresses servo-held at the
-    confining pressure, the axis compressed at the strain rate) of `start` (default: a
-    packing generated from [rve]); the curve as arrays, one per column of the CLI's CSV
-    (docs/dem.md: axial_strain, p, q, q_over_p, volumetric_strain, porosity, ...).
-    per_rve: a start of several RVEs (packing() of several files) gives one curve per
-    RVE, all tested together; else the curve of RVE 0."""
+    """Drained triaxial compression of `start` ([triaxial]).
+
+    The lateral stresses are servo-held at the confining pressure [Pa] and the axis is
+    compressed at the strain rate [1/s].
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    start : RVEBatch, optional
+        The packing to test, copied first (default: a packing generated from [rve]).
+    on_row : callable, optional
+        ``on_row(row)`` is called with each output row (a dict) as it is computed.
+    progress : bool, default True
+        Show progress on stderr.
+    per_rve : bool, default False
+        For a start of several RVEs (packing() of several files): one curve per RVE,
+        all tested together; else the curve of RVE 0.
+
+    Returns
+    -------
+    Curve or list of Curve
+        The curve as arrays, one per column of the CLI's CSV (docs/dem.md:
+        axial_strain, p, q, q_over_p, volumetric_strain, porosity, ...); a list of
+        curves, one per RVE, with `per_rve`.
+
+    Raises
+    ------
+    ConfigError
+        If the parameters have no [triaxial] table, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+
+    Examples
+    --------
+    >>> from grainscale import rve
+    >>> params = rve.load("examples/rve/unit_element.toml")
+    >>> start = rve.generate(params)
+    >>> curve = rve.triaxial(params, start)
+    >>> curve["axial_strain"], curve["q_over_p"].max()
+    """
     case = _case(params)
     return _test("triaxial", element_tests.triaxial, case, case.triaxial, start, on_row,
                  progress, per_rve)
@@ -115,13 +252,42 @@ def triaxial(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
 
 def triaxial_ensemble(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
                       *, replicas: int = 8, seed: int = 0, progress: bool = True) -> Curve:
-    """Mean drained triaxial curve over `replicas` copies of `start` (default: generated
-    from [rve]) whose grain velocities differ by ~1e-9 m/s: chaos makes each a different
+    """Mean drained triaxial curve over `replicas` copies of `start`.
+
+    The copies' grain velocities differ by ~1e-9 [m/s]: chaos makes each a different
     realisation of the same RVE, as the RVEs of a multiscale run's points become, so
     this is the like-for-like reference of a multiscale curve (docs/validation.md §1).
-    Every column is the mean over the copies; `q_over_p_sem` and `volumetric_strain_sem`
-    are the standard errors of those means, std / sqrt(replicas): the realisation noise
-    left in them."""
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    start : RVEBatch, optional
+        The packing to copy (default: generated from [rve]).
+    replicas : int, default 8
+        Number of copies, at least 2.
+    seed : int, default 0
+        Seed of the velocity perturbations.
+    progress : bool, default True
+        Show progress on stderr.
+
+    Returns
+    -------
+    Curve
+        Every column of `triaxial`'s curve as the mean over the copies, plus
+        `q_over_p_sem` and `volumetric_strain_sem`: the standard errors of those means,
+        std / sqrt(replicas), the realisation noise left in them.
+
+    Raises
+    ------
+    ConfigError
+        If `replicas` < 2 (a spread needs two), the parameters have no [triaxial] table,
+        or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+    """
     case = _case(params)
     if replicas < 2:
         raise ConfigError(f"replicas = {replicas}: valid >= 2 (a spread needs two)")
@@ -142,7 +308,33 @@ def triaxial_ensemble(params: RVECase | Case | str | Path, start: RVEBatch | Non
 def undrained(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
               on_row: Callable[[dict], None] | None = None, *,
               progress: bool = True) -> Curve:
-    """Constant-volume compression ([undrained]) of `start`; the curve as arrays."""
+    """Constant-volume compression of `start` ([undrained]).
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    start : RVEBatch, optional
+        The packing to test, copied first (default: a packing generated from [rve]).
+    on_row : callable, optional
+        ``on_row(row)`` is called with each output row (a dict) as it is computed.
+    progress : bool, default True
+        Show progress on stderr.
+
+    Returns
+    -------
+    Curve
+        The curve of RVE 0 as arrays, one per column of the CLI's CSV (docs/dem.md).
+
+    Raises
+    ------
+    ConfigError
+        If the parameters have no [undrained] table, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+    """
     case = _case(params)
     return _test("undrained", element_tests.undrained, case, case.undrained, start, on_row,
                  progress)
@@ -151,7 +343,33 @@ def undrained(params: RVECase | Case | str | Path, start: RVEBatch | None = None
 def isotropic(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
               on_row: Callable[[dict], None] | None = None, *,
               progress: bool = True) -> Curve:
-    """Isotropic compression to [isotropic] pressure_final; the curve as arrays."""
+    """Isotropic compression of `start` to [isotropic] pressure_final [Pa].
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    start : RVEBatch, optional
+        The packing to test, copied first (default: a packing generated from [rve]).
+    on_row : callable, optional
+        ``on_row(row)`` is called with each output row (a dict) as it is computed.
+    progress : bool, default True
+        Show progress on stderr.
+
+    Returns
+    -------
+    Curve
+        The curve of RVE 0 as arrays, one per column of the CLI's CSV (docs/dem.md).
+
+    Raises
+    ------
+    ConfigError
+        If the parameters have no [isotropic] table, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+    """
     case = _case(params)
     return _test("isotropic", element_tests.isotropic, case, case.isotropic, start, on_row,
                  progress)
@@ -159,7 +377,33 @@ def isotropic(params: RVECase | Case | str | Path, start: RVEBatch | None = None
 
 def shear(params: RVECase | Case | str | Path, start: RVEBatch | None = None,
           on_row: Callable[[dict], None] | None = None, *, progress: bool = True) -> Curve:
-    """Simple shear in x-z at constant normal stress ([shear]); the curve as arrays."""
+    """Simple shear of `start` in x-z at constant normal stress ([shear]).
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    start : RVEBatch, optional
+        The packing to test, copied first (default: a packing generated from [rve]).
+    on_row : callable, optional
+        ``on_row(row)`` is called with each output row (a dict) as it is computed.
+    progress : bool, default True
+        Show progress on stderr.
+
+    Returns
+    -------
+    Curve
+        The curve of RVE 0 as arrays, one per column of the CLI's CSV (docs/dem.md).
+
+    Raises
+    ------
+    ConfigError
+        If the parameters have no [shear] table, or as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+    """
     case = _case(params)
     return _test("shear", element_tests.simple_shear, case, case.shear, start, on_row,
                  progress)
@@ -172,20 +416,73 @@ def flow(params: RVECase | Case | str | Path, start: RVEBatch | None = None, *,
          material: str = "rve_fit", on_point: Callable[[dict], None] | None = None,
          progress: bool = True, names: dict[str, str] | None = None,
          source: str | None = None) -> dict:
-    """Steady simple shear of `start` (default: generated from [rve]), tiled
-    tiles x tiles x tiles, at each pressure [Pa] (default rve.preparation.pressure) and
-    each inertial number (or shear rate [1/s], `rates`), to `strain`, averaged from
-    `steady_from` (docs/dem.md: flow rule); the mu(I) law fitted to it.
+    """Steady simple shear of `start` at each pressure and rate; the mu(I) law fitted.
 
-    Returns {"table": a Curve with one row per (pressure, rate), columns those of the
-    CLI's CSV (I, mu, mu_err, mu_p, sigma_n, porosity, ...), "fits": {"mu": fit of
-    mu(I), "mu_p": of mu_p(I_p)} (each mu_s, mu_2, I_0 with standard errors; empty where
-    the points do not determine a law), "material": the fitted `[materials.MATERIAL]
-    type = "mu_i"` table as TOML text (None without a fit), "diameter": the mean grain
-    diameter [m], "fit_error": why there is no fit (or None)}. on_point(row) receives
-    each row as it is measured. ConfigError names a bad argument (`names` maps these
-    keywords to the caller's spelling, e.g. the CLI's options) before any shearing;
-    `source` names the parameters in the material table's comment."""
+    The packing is tiled tiles x tiles x tiles, sheared to `strain` at each pressure and
+    each inertial number (or shear rate), and averaged from `steady_from`
+    (docs/dem.md: flow rule).
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables: an RVECase (`load`), a file's path, the tables as a dict
+        (``{"rve": {...}, "triaxial": {...}}``, as the TOML holds them) or a multiscale
+        Case (its [rve] and test tables).
+    start : RVEBatch, optional
+        The packing to shear (default: generated from [rve]).
+    inertial : sequence of float, optional
+        Inertial numbers I to shear at; give this or `rates`.
+    rates : sequence of float, optional
+        Shear rates [1/s] to shear at, instead of `inertial`.
+    pressures : sequence of float, optional
+        Normal pressures [Pa] (default rve.preparation.pressure).
+    strain : float, default 3.0
+        Shear strain of each run, in (0, 20].
+    steady_from : float, default 1.0
+        Shear strain from which the steady means are taken.
+    tiles : int, default 1
+        Copies of the cell along each axis (at most 10,000,000 particles in all).
+    allow_damping : bool, default False
+        Measure even with rve.damping > 0 (local damping acts as a viscosity and changes
+        the measured mu(I)).
+    material : str, default "rve_fit"
+        Name of the fitted material table (a TOML bare key).
+    on_point : callable, optional
+        ``on_point(row)`` receives each row of the table as it is measured.
+    progress : bool, default True
+        Show progress on stderr.
+    names : dict of str to str, optional
+        Maps these keywords to the caller's spelling in error messages (e.g. the CLI's
+        options).
+    source : str, optional
+        Names the parameters in the material table's comment.
+
+    Returns
+    -------
+    dict
+        ``"table"``: a Curve with one row per (pressure, rate), columns those of the
+        CLI's CSV (I, mu, mu_err, mu_p, sigma_n, porosity, ...). ``"fits"``:
+        ``{"mu": fit of mu(I), "mu_p": of mu_p(I_p)}``, each mu_s, mu_2, I_0 with
+        standard errors; empty where the points do not determine a law.
+        ``"material"``: the fitted ``[materials.MATERIAL] type = "mu_i"`` table as TOML
+        text (None without a fit). ``"diameter"``: the mean grain diameter [m].
+        ``"fit_error"``: why there is no fit (or None).
+
+    Raises
+    ------
+    ConfigError
+        Naming a bad argument, its value and the valid range, before any shearing; or
+        as for an invalid `params`.
+    TypeError
+        If `params` is none of the accepted kinds.
+
+    Examples
+    --------
+    >>> from grainscale import rve
+    >>> law = rve.flow("examples/column_collapse/quick.toml", inertial=[0.01, 0.05, 0.2],
+    ...                pressures=[500.0], strain=2.0, steady_from=0.8)
+    >>> law["fits"]["mu"]["mu_s"], law["material"]
+    """
     from grainscale.dem import flow as _flow
 
     case = _case(params)
@@ -275,7 +572,18 @@ def _check_flow(case: RVECase, pressures, speeds, speed_key: str, strain: float,
 
 
 def rows_of(curve: Curve) -> list[dict[str, float]]:
-    """The curve's rows (one dict per output row), as the CLI writes them."""
+    """The curve's rows, as the CLI writes them.
+
+    Parameters
+    ----------
+    curve : Curve
+        A curve: column name to an array, all of one length.
+
+    Returns
+    -------
+    list of dict of str to float
+        One dict per output row, column name to value.
+    """
     n = len(next(iter(curve.values())))
     return [{k: float(v[i]) for k, v in curve.items()} for i in range(n)]
 

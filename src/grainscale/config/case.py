@@ -413,19 +413,64 @@ class Case(StrictModel):
     _case_dir: Path | None = PrivateAttr(default=None)
 
     def check(self) -> Case:
-        """A validated copy of this (edited) case: every table re-read as from a file,
-        then the cross-table checks; ConfigError names the key, the value and the valid
-        range, as `grainscale run` does."""
+        """A validated copy of this (edited) case.
+
+        Every table is re-read as from a file, then the cross-table checks are done, as
+        `grainscale run` does; `grainscale.run` checks a Case the same way before any
+        computation.
+
+        Returns
+        -------
+        Case
+            The validated copy (relative paths still resolve against the case file's
+            folder).
+
+        Raises
+        ------
+        ConfigError
+            Naming the key, the value and the valid range.
+
+        Examples
+        --------
+        >>> import grainscale as gs
+        >>> case = gs.load_case("examples/unit_element/case.toml")
+        >>> case.materials["sand"].library = 4
+        >>> case = case.check()
+        """
         fresh = validate(Case, self.model_dump(mode="json", exclude_unset=True))
         check_case(fresh)
         fresh._case_dir = self._case_dir
         return fresh
 
     def edited(self, change: Callable[[dict], object]) -> Case:
-        """A validated copy of this case after `change(tables)` edits its tables in
-        place: the keys given or edited as nested dicts and lists, as in the TOML (for
-        edits that replace or remove whole tables, which assignment cannot). ConfigError
-        as check()."""
+        """A validated copy of this case after `change(tables)` edits its tables in place.
+
+        For edits that replace or remove whole tables, which assignment cannot.
+
+        Parameters
+        ----------
+        change : callable
+            ``change(tables)`` edits, in place, the keys given or edited as nested dicts
+            and lists, as in the TOML; what it returns is ignored.
+
+        Returns
+        -------
+        Case
+            The validated copy.
+
+        Raises
+        ------
+        ConfigError
+            As check(): naming the key, the value and the valid range.
+
+        Examples
+        --------
+        >>> import grainscale as gs
+        >>> case = gs.load_case("examples/unit_element/case.toml")
+        >>> def no_probes(t):
+        ...     t["output"].pop("probes", None)
+        >>> case = case.edited(no_probes)
+        """
         tables = self.model_dump(mode="json", exclude_unset=True, exclude_none=True)
         change(tables)
         fresh = validate(Case, tables)
@@ -434,13 +479,41 @@ class Case(StrictModel):
         return fresh
 
     def continuum_twin(self, material: dict, title: str | None = None) -> Case:
-        """The same case with every material replaced by the continuum `material` (a
-        [materials.X] table as a dict, e.g. type = "mohr_coulomb" or "mu_i",
-        docs/case-files.md), under the first material's name: the same grid, bodies,
-        boundaries, rigid body, solver and output, without the DEM side ([rve] and the
-        element tests, the probes, the DEM-only history columns, checkpoints). The
-        twin of a multiscale run that a phenomenological law gives (docs/validation.md
-        §2.3, §3)."""
+        """The same case with every material replaced by the continuum `material`.
+
+        The twin of a multiscale run that a phenomenological law gives
+        (docs/validation.md §2.3, §3): the same grid, bodies, boundaries, rigid body,
+        solver and output, without the DEM side ([rve] and the element tests, the
+        probes, the DEM-only history columns, checkpoints).
+
+        Parameters
+        ----------
+        material : dict
+            A [materials.X] table as a dict, e.g. type = "mohr_coulomb" or "mu_i"
+            (docs/case-files.md); it takes the first material's name.
+        title : str, optional
+            The twin's title (default: this case's).
+
+        Returns
+        -------
+        Case
+            The validated twin.
+
+        Raises
+        ------
+        ConfigError
+            If `material` is of type "dem", or the twin is not a valid case (naming the
+            key, the value and the valid range).
+
+        Examples
+        --------
+        >>> import grainscale as gs
+        >>> case = gs.load_case("examples/column_collapse/quick.toml")
+        >>> twin = case.continuum_twin(
+        ...     {"type": "mohr_coulomb", "density": 1600.0, "youngs_modulus": 10e6,
+        ...      "poisson_ratio": 0.3, "friction_angle": 20.0}, title="Mohr-Coulomb twin")
+        >>> result = gs.run(twin, "quick_mc")
+        """
         if material.get("type") == "dem":
             raise ConfigError("continuum_twin: material.type = 'dem': give a continuum "
                               "(mohr_coulomb, mu_i, ...)")
@@ -461,10 +534,29 @@ class Case(StrictModel):
         return self.edited(change)
 
     def save(self, path) -> Path:
-        """Write the case as TOML that load_case reads back to the same case: the keys
-        given or edited, not the defaults (case.resolved.toml in a run's folder has
-        those). Relative paths are written as they are: save beside the original file
-        to keep them valid."""
+        """Write the case as TOML that load_case reads back to the same case.
+
+        The keys given or edited are written, not the defaults (case.resolved.toml in a
+        run's folder has those). Relative paths are written as they are: save beside the
+        original file to keep them valid.
+
+        Parameters
+        ----------
+        path : str or pathlib.Path
+            The TOML file to write.
+
+        Returns
+        -------
+        pathlib.Path
+            `path`.
+
+        Examples
+        --------
+        >>> import grainscale as gs
+        >>> case = gs.load_case("examples/column_collapse/mohr_coulomb.toml")
+        >>> case.time.end = 0.1
+        >>> case.save("examples/column_collapse/mohr_coulomb_short.toml")
+        """
         path = Path(path)
         path.write_text(tomli_w.dumps(self.model_dump(mode="json", exclude_unset=True,
                                                       exclude_none=True)))
@@ -583,8 +675,34 @@ def _check_probes(case: Case) -> None:
 
 
 def load_case(path) -> Case:
-    """Read, validate and cross-check a case file (relative paths in it resolve against
-    its folder)."""
+    """Read, validate and cross-check a case file.
+
+    Relative paths in it (packings, points files) resolve against its folder, also when
+    the case is edited and run from Python.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The case file (TOML, docs/case-files.md).
+
+    Returns
+    -------
+    Case
+        The validated case.
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing or not TOML, or a key is invalid (naming the key, the
+        value and the valid range, as `grainscale run` reports it).
+
+    Examples
+    --------
+    >>> import grainscale as gs
+    >>> case = gs.load_case("examples/column_collapse/mohr_coulomb.toml")
+    >>> case.materials["sand"].friction_angle = 25.0  # validated on assignment
+    >>> case.time.end
+    """
     case = load_toml(path, Case)
     check_case(case)
     case._case_dir = Path(path).resolve().parent
