@@ -1,8 +1,11 @@
-"""Regular Cartesian background grid.
+"""Cartesian background grid: uniform, or rectilinear (graded).
 
 Nodes are numbered `I = i + nx * (j + ny * k)` with `nx, ny, nz = cells + 1`; node
-(i, j, k) sits at `origin + (i, j, k) * cell_size`. The grid never moves (the "scratch
-pad" of seed §2.1); nodal arrays are rebuilt every step.
+(i, j, k) sits at `origin + (i, j, k) * cell_size` on a uniform grid, at
+`(axes[0][i], axes[1][j], axes[2][k])` on a rectilinear one (mpm/rectilinear.py), whose
+`cell_size` is then each axis' smallest cell (what the time step and the force bounds
+need). The grid never moves (the "scratch pad" of seed §2.1); nodal arrays are rebuilt
+every step.
 
 Periodic axes: the material lives in [o, o + N h) along such an axis (o, N the case's
 origin and cells) and leaves through one end to re-enter at the other. The grid held here
@@ -27,6 +30,7 @@ class Grid:
     cell_size: np.ndarray  # (3,) m, edge lengths of one cell
     cells: np.ndarray  # (3,) int64, number of cells per axis
     period: np.ndarray = None  # (3,) int64 cells of a periodic axis' period, 0 otherwise
+    axes: tuple = None  # rectilinear: the node coordinates of each axis (3 arrays, m)
 
     @classmethod
     def make(cls, origin, cell_size, cells, periodic=(False, False, False)) -> Grid:
@@ -41,6 +45,24 @@ class Grid:
         o = np.asarray(origin, dtype=np.float64).reshape(3).copy()
         period = np.where(per, n, 0).astype(np.int64)
         return cls(o - PAD * h * per, h, n + 2 * PAD * per, period)
+
+    @classmethod
+    def rectilinear(cls, axes) -> Grid:
+        """The grid of the node coordinates `axes` (x, y, z), each checked by
+        rectilinear.check_nodes (ValueError naming nodes_x, nodes_y or nodes_z)."""
+        from grainscale.mpm.rectilinear import check_nodes
+
+        ax = tuple(check_nodes(a, f"nodes_{'xyz'[i]}") for i, a in enumerate(axes))
+        return cls(np.array([a[0] for a in ax]), np.array([np.diff(a).min() for a in ax]),
+                   np.array([len(a) - 1 for a in ax], dtype=np.int64),
+                   np.zeros(3, dtype=np.int64), ax)
+
+    @property
+    def cell_max(self) -> np.ndarray:
+        """(3,) m, each axis' largest cell."""
+        if self.axes is None:
+            return self.cell_size
+        return np.array([np.diff(a).max() for a in self.axes])
 
     @property
     def periodic(self) -> np.ndarray:
@@ -86,11 +108,14 @@ class Grid:
     @property
     def upper(self) -> np.ndarray:
         """(3,) m, position of the last node."""
+        if self.axes is not None:
+            return np.array([a[-1] for a in self.axes])
         return self.origin + self.cells * self.cell_size
 
     def node_positions(self) -> np.ndarray:
         """(n_nodes, 3) positions, in node numbering order."""
-        axes = [self.origin[a] + np.arange(self.nodes[a]) * self.cell_size[a] for a in range(3)]
+        axes = self.axes or [self.origin[a] + np.arange(self.nodes[a]) * self.cell_size[a]
+                             for a in range(3)]
         z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
         return np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
 

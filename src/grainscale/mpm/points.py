@@ -68,8 +68,11 @@ def take(pts: Points, ids: np.ndarray) -> Points:
                      for f in fields(Points)})
 
 
-def _lattice(grid: Grid, lo, hi, n: int) -> np.ndarray:
-    """Sub-cell centres (n per cell and axis) of all grid cells overlapping the box [lo, hi]."""
+def _lattice(grid: Grid, lo, hi, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-cell centres (n per cell and axis) of all grid cells overlapping the box
+    [lo, hi], and the volume of each sub-cell (its cell's volume / n^3)."""
+    if grid.axes is not None:
+        return _lattice_rectilinear(grid, lo, hi, n)
     h = grid.cell_size
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
@@ -80,15 +83,33 @@ def _lattice(grid: Grid, lo, hi, n: int) -> np.ndarray:
         k = np.arange(c0[a] * n, c1[a] * n)
         axes.append(grid.origin[a] + (k + 0.5) * h[a] / n)
     X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    return np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    x = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    return x, np.full(x.shape[0], np.prod(grid.cell_size / n))
+
+
+def _lattice_rectilinear(grid: Grid, lo, hi, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """_lattice on a rectilinear grid: n sub-cells per local cell and axis."""
+    centres, widths = [], []
+    for a in range(3):
+        X = grid.axes[a]
+        c0 = max(int(np.searchsorted(X, lo[a], side="right")) - 1, 0)
+        c1 = min(int(np.searchsorted(X, hi[a], side="left")), len(X) - 1)
+        h = np.repeat(np.diff(X[c0:c1 + 1]), n) / n
+        start = np.repeat(X[c0:c1], n)
+        k = np.tile(np.arange(n), c1 - c0)
+        centres.append(start + (k + 0.5) * h)
+        widths.append(h)
+    C = np.meshgrid(*centres, indexing="ij")
+    W = np.meshgrid(*widths, indexing="ij")
+    x = np.stack([c.ravel() for c in C], axis=1)
+    return x, (W[0] * W[1] * W[2]).ravel()
 
 
 def fill_box(grid: Grid, lo, hi, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Positions (P,3) and volumes (P,) of the n^3-per-cell points whose centres lie in [lo, hi]."""
-    x = _lattice(grid, lo, hi, n)
+    x, vol = _lattice(grid, lo, hi, n)
     inside = np.all((x >= np.asarray(lo)) & (x <= np.asarray(hi)), axis=1)
-    x = x[inside]
-    return x, np.full(x.shape[0], np.prod(grid.cell_size / n))
+    return x[inside], vol[inside]
 
 
 def fill_cylinder(grid: Grid, center, radius: float, height: float, axis: int,
@@ -100,13 +121,12 @@ def fill_cylinder(grid: Grid, center, radius: float, height: float, axis: int,
     hi = center + radius
     lo[axis] = center[axis]
     hi[axis] = center[axis] + height
-    x = _lattice(grid, lo, hi, n)
+    x, vol = _lattice(grid, lo, hi, n)
     d = x - center
     d[:, axis] = 0.0
     inside = (np.einsum("ij,ij->i", d, d) <= radius**2) & (x[:, axis] >= lo[axis]) & (
         x[:, axis] <= hi[axis])
-    x = x[inside]
-    return x, np.full(x.shape[0], np.prod(grid.cell_size / n))
+    return x[inside], vol[inside]
 
 
 def read_points(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

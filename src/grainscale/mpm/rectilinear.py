@@ -1,6 +1,6 @@
 """Rectilinear (tensor-product) grids: node coordinates per axis, graded axes, and the
-linear and GIMP shape functions on cells of unequal size. (The case file's [grid] does
-not yet take node coordinates: the solver's grids are uniform, mpm/grid.py.)
+linear and GIMP shape functions on cells of unequal size (docs/mpm.md: graded grids;
+Grid.rectilinear; the case file's [grid] does not take node lists yet).
 
 A rectilinear grid has, along each axis a, strictly increasing node coordinates
 X_0 < X_1 < ... < X_n (ParaView's RectilinearGrid); cell c spans [X_c, X_c+1]. Node I's
@@ -200,18 +200,25 @@ def weights_1d(nodes, x, lp, ns, base, w, dw):
             dw[p, k] = g
 
 
-def evaluate(x: np.ndarray, lp: np.ndarray, axes: list[np.ndarray], gimp: bool = True):
+def stencil(axes, lp_max: float, gimp: bool = True) -> int:
+    """Nodes per axis of the stencil on the grid `axes` for half-widths up to lp_max (the
+    widest of the three axes; at most every node of the shortest axis)."""
+    l = lp_max if gimp else 0.0
+    return min(max(stencil_width(np.asarray(a), l) for a in axes), min(len(a) for a in axes))
+
+
+def evaluate(x: np.ndarray, lp: np.ndarray, axes, gimp: bool = True, out=None):
     """Shape functions of points x (P,3) with half-widths lp (P,) on the rectilinear grid
     of node coordinates `axes` (three arrays): (base (P,3) int64, w and dw (P,3,ns)),
-    the layout of mpm/shape.py with ns nodes per axis; gimp=False: the linear hats."""
+    the layout of mpm/shape.py with ns nodes per axis; gimp=False: the linear hats.
+    `out` may pass (base, w, dw) to fill, ns = w.shape[2] (at least `stencil`)."""
     P = x.shape[0]
     l = np.ascontiguousarray(lp if gimp else np.zeros(P), dtype=np.float64)
-    lmax = float(l.max()) if P else 0.0
-    ns = max(stencil_width(np.asarray(a), lmax) for a in axes)
-    ns = min(ns, min(len(a) for a in axes))
-    base = np.empty((P, 3), dtype=np.int64)
-    w = np.empty((P, 3, ns))
-    dw = np.empty((P, 3, ns))
+    if out is None:
+        ns = stencil(axes, float(l.max()) if P else 0.0)
+        out = (np.empty((P, 3), dtype=np.int64), np.empty((P, 3, ns)), np.empty((P, 3, ns)))
+    base, w, dw = out
+    ns = w.shape[2]
     for a in range(3):
         b = np.empty(P, dtype=np.int64)
         wa, da = np.empty((P, ns)), np.empty((P, ns))

@@ -94,6 +94,10 @@ def evaluate(x: np.ndarray, lp: np.ndarray, grid: Grid, kind: str = GIMP, out=No
     `out` may pass preallocated (base, w, dw) arrays to fill (no allocation per step).
     """
     P = x.shape[0]
+    if grid.axes is not None:  # rectilinear: a stencil as wide as the widest domain needs
+        from grainscale.mpm import rectilinear
+
+        return rectilinear.evaluate(x, lp, grid.axes, gimp=kind == GIMP, out=out)
     ns = stencil_width(kind)
     if out is None:
         out = (np.empty((P, 3), dtype=np.int64), np.empty((P, 3, 3)), np.empty((P, 3, 3)))

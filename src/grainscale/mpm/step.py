@@ -22,7 +22,7 @@ from grainscale.mpm.fluidity import advance_fluidity
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import Points
 from grainscale.mpm.rigid import RigidBody
-from grainscale.mpm.shape import evaluate, stencil_width
+from grainscale.mpm.shape import GIMP, evaluate, stencil_width
 from grainscale.mpm.transfer import (
     Transfer,
     fixed_point_scale,
@@ -84,11 +84,19 @@ class MPMState:
         P = self.points.n
         self.n_global = self.comm.total(P)  # points over all ranks
         self.ns = stencil_width(self.shape)
+        slots = 3  # the uniform kernels fill 3 slots per axis, linear hats too
+        if self.grid.axes is not None:  # rectilinear: from the widest point domain
+            from grainscale.mpm.rectilinear import stencil
+
+            lp_max = float(self.comm.max([float(self.points.lp.max()) if P else 0.0])[0])
+            self.ns = slots = stencil(self.grid.axes, lp_max, self.shape == GIMP)
+            if self.grid.periodic.any():
+                raise ValueError("periodic axes on a rectilinear grid: not supported")
         self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads, self.comm, self.n_global,
                                  fold=self.grid.fold if self.grid.periodic.any() else None)
         self.dH = np.zeros((P, 3, 3))
-        self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
-                          np.zeros((P, 3, 3)))
+        self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, slots)),
+                          np.zeros((P, 3, slots)))
         self.fext = np.zeros((P, 3))  # N, point forces (none yet: loads act on nodes)
         vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
         mmax = float(self.points.m.max()) if P else 0.0

@@ -64,6 +64,43 @@ def _p2g_mm_point(p, m, v, C, x, origin, h, base, w, nx, ny, ns, mscale, pscale,
                 b[I, 3] += np.int64(np.rint(sm * vz * pscale))
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _p2g_mm_point_rect(p, m, v, C, x, X, base, w, nx, ny, ns, mscale, pscale, b):
+    """_p2g_mm_point on a rectilinear grid: node (i, j, k) at (X[0, i], X[1, j], X[2, k])."""
+    mp = m[p]
+    for k in range(ns):
+        iz = base[p, 2] + k
+        wz = w[p, 2, k]
+        dz = X[2, iz] - x[p, 2]
+        for j in range(ns):
+            iy = base[p, 1] + j
+            row = nx * (iy + ny * iz) + base[p, 0]
+            wyz = w[p, 1, j] * wz
+            dy = X[1, iy] - x[p, 1]
+            for i in range(ns):
+                I = row + i
+                dx = X[0, base[p, 0] + i] - x[p, 0]
+                sm = w[p, 0, i] * wyz * mp
+                vx = v[p, 0] + C[p, 0, 0] * dx + C[p, 0, 1] * dy + C[p, 0, 2] * dz
+                vy = v[p, 1] + C[p, 1, 0] * dx + C[p, 1, 1] * dy + C[p, 1, 2] * dz
+                vz = v[p, 2] + C[p, 2, 0] * dx + C[p, 2, 1] * dy + C[p, 2, 2] * dz
+                b[I, 0] += np.int64(np.rint(sm * mscale))
+                b[I, 1] += np.int64(np.rint(sm * vx * pscale))
+                b[I, 2] += np.int64(np.rint(sm * vy * pscale))
+                b[I, 3] += np.int64(np.rint(sm * vz * pscale))
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def _p2g_mm_rect_task(t, nt, m, v, C, x, X, base, w, nodes, ns, mscale, pscale, buf):
+    P = m.shape[0]
+    b = buf[t]
+    b[:, :] = 0
+    for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
+        for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
+            _p2g_mm_point_rect(p, m, v, C, x, X, base, w, nodes[0], nodes[1], ns, mscale,
+                               pscale, b)
+
+
 @njit(cache=True, fastmath=True, nogil=True)
 def _p2g_mm_task(t, nt, m, v, C, x, origin, h, base, w, nodes, ns, mscale, pscale, buf):
     P = m.shape[0]
@@ -474,7 +511,7 @@ class Transfer:
         # within 2 cells of its point. Its two maxima are reduced over ranks apart: the
         # maximum of per-rank sums is not the sum of the global maxima, and a scale that
         # depended on the split would round the momentum differently on other ranks
-        reach = 2.0 * float(grid.cell_size.max())
+        reach = 2.0 * float(grid.cell_max.max())
         ok = P and not bad
         local = [float(m.max()) if P else 0.0, float(np.abs(v).max()) if ok else 0.0,
                  float(np.abs(C).sum(axis=2).max()) if ok else 0.0, 1.0 if bad else 0.0]
@@ -485,7 +522,14 @@ class Transfer:
         mscale = fixed_point_scale(self.n_global * g[0])
         pscale = fixed_point_scale(self.n_global * g[0] * vbound)
         nodes = grid.nodes
-        if P:
+        if P and grid.axes is not None:  # rectilinear: node positions from the table
+            X = np.zeros((3, int(nodes.max())))
+            for a in range(3):
+                X[a, :nodes[a]] = grid.axes[a]
+            parallel_for(_p2g_mm_rect_task, m, v, C, x, X, base, w, nodes, ns, mscale,
+                         pscale, self.buf4, nt=self.buf4.shape[0])
+            np.sum(self.buf4, axis=0, out=self.sum4)
+        elif P:
             p2g_mass_momentum_kernel(m, v, C, x, grid.origin, grid.cell_size, base, w, nodes,
                                      ns, mscale, pscale, self.buf4)
             np.sum(self.buf4, axis=0, out=self.sum4)  # exact: integers
