@@ -221,7 +221,7 @@ class RigidBody:
         """Ids of the nodes the body covers at its current position (`nodes` contact)."""
         if grid.axes is not None:  # the kernel locates nodes on a uniform lattice
             raise ValueError("rigid contact = 'nodes' on a rectilinear grid: not supported; "
-                             "valid there: contact = 'penalty'")
+                             "use contact = 'penalty'")
         mark = np.zeros(grid.n_nodes, dtype=np.bool_)
         mark_covered_nodes_kernel(self.x, self.lp, grid.origin, grid.cell_size, grid.cells,
                                   mark)
