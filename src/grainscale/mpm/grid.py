@@ -18,6 +18,7 @@ period (after G2P).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -56,6 +57,15 @@ class Grid:
         return cls(np.array([a[0] for a in ax]), np.array([np.diff(a).min() for a in ax]),
                    np.array([len(a) - 1 for a in ax], dtype=np.int64),
                    np.zeros(3, dtype=np.int64), ax)
+
+    @cached_property
+    def node_table(self) -> np.ndarray:
+        """(3, max nodes) m: row a holds axis a's node coordinates (rectilinear grids; the
+        kernels' view of `axes`), zero-padded; built once."""
+        table = np.zeros((3, int(self.nodes.max())))
+        for a in range(3):
+            table[a, :self.nodes[a]] = self.axes[a]
+        return table
 
     @property
     def cell_max(self) -> np.ndarray:

@@ -218,11 +218,7 @@ def evaluate(x: np.ndarray, lp: np.ndarray, axes, gimp: bool = True, out=None):
         ns = stencil(axes, float(l.max()) if P else 0.0)
         out = (np.empty((P, 3), dtype=np.int64), np.empty((P, 3, ns)), np.empty((P, 3, ns)))
     base, w, dw = out
-    ns = w.shape[2]
-    for a in range(3):
-        b = np.empty(P, dtype=np.int64)
-        wa, da = np.empty((P, ns)), np.empty((P, ns))
-        weights_1d(np.ascontiguousarray(axes[a], dtype=np.float64),
-                   np.ascontiguousarray(x[:, a]), l, ns, b, wa, da)
-        base[:, a], w[:, a], dw[:, a] = b, wa, da
+    for a in range(3):  # each axis written in place through strided views
+        weights_1d(np.asarray(axes[a], dtype=np.float64), x[:, a], l, w.shape[2],
+                   base[:, a], w[:, a], dw[:, a])
     return base, w, dw

@@ -523,10 +523,7 @@ class Transfer:
         pscale = fixed_point_scale(self.n_global * g[0] * vbound)
         nodes = grid.nodes
         if P and grid.axes is not None:  # rectilinear: node positions from the table
-            X = np.zeros((3, int(nodes.max())))
-            for a in range(3):
-                X[a, :nodes[a]] = grid.axes[a]
-            parallel_for(_p2g_mm_rect_task, m, v, C, x, X, base, w, nodes, ns, mscale,
+            parallel_for(_p2g_mm_rect_task, m, v, C, x, grid.node_table, base, w, nodes, ns, mscale,
                          pscale, self.buf4, nt=self.buf4.shape[0])
             np.sum(self.buf4, axis=0, out=self.sum4)
         elif P:
