@@ -17,7 +17,14 @@ Sections, each timed and guarded (an error is recorded, the next section runs):
    configuration also the bytes moved per RVE and call, the resident bytes per sphere,
    the time of a call of zero steps (launch and small copies: the per-MPM-step transfer
    cost), of a full pull (a checkpoint's), and the per-call path's time as a ratio.
-4. `column`: examples/column_collapse/quick.toml for --steps MPM steps with --device cuda
+4. `baseline` (with --baseline DIR, a copy of another version's src/): the throughput
+   configurations --baseline-configs measured with that version's kernel in a subprocess,
+   on the same GPU in the same lease, so that a change is judged as a ratio.
+5. `profile` (with --profile SPHERESxRVESxTHREADS): Nsight Compute (ncu) on the batch
+   kernel's second call of that configuration (the first compiles and builds lists):
+   speed of light, occupancy, launch statistics, memory and compute workload, warp
+   states; the report as text in OUT/ncu.txt.
+6. `column`: examples/column_collapse/quick.toml for --steps MPM steps with --device cuda
    and on all CPU cores: wall time and DEM seconds per MPM step of each (cost.json).
 
 On a machine without network (the lent GPU machines), the Python packages missing there
@@ -154,12 +161,16 @@ def tests(budget: float) -> dict:
     return {"returncode": run.returncode, "tail": tail}
 
 
-def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool) -> dict:
+def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool,
+            regs: int | None = None) -> dict:
     """One configuration of the resident kernel (see the module docstring, 3.)."""
     from grainscale.dem import cuda_kernel, engine
     from grainscale.dem.device_batch import DeviceBatch
 
     cuda_kernel.THREADS = threads
+    if regs is not None:
+        cuda_kernel.MAX_REGISTERS = regs
+    regs = getattr(cuda_kernel, "MAX_REGISTERS", None)  # a version without it: None
     batch = tiled(base, count, np.random.default_rng(0))
     dH = np.zeros((count, 3, 3))
     dH[:, 2, 2] = -0.1 * steps * dt  # one MPM increment of axial strain at 0.1 /s
@@ -191,7 +202,7 @@ def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool) 
     dev.pull()
     pull_s = time.perf_counter() - t0
     res = {"rves": count, "particles": base.n_particles, "threads": threads,
-           "steps_per_call": steps, "call_s": round(best, 5),
+           "max_registers": regs, "steps_per_call": steps, "call_s": round(best, 5),
            "ns_per_particle_step": round(best / (count * base.n_particles * steps) * 1e9, 4),
            "first_call_s": round(first_s, 3), "zero_step_call_s": round(zero_s, 5),
            "push_s": round(push_s, 4), "pull_s": round(pull_s, 4),
@@ -207,7 +218,8 @@ def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool) 
     return res
 
 
-def throughput(inputs: Path, deadline: float, configs: list[str] | None = None) -> list:
+def throughput(inputs: Path, deadline: float, configs: list[str] | None = None,
+               per_call: bool = True) -> list:
     """The grid of 3. (or `configs`, "SPHERESxRVESxTHREADS" each), cheapest first; a
     configuration predicted to overrun the deadline (from the last ns per
     particle-step, and ~0.3 us per sphere of tiling and copies) is skipped and marked."""
@@ -215,10 +227,10 @@ def throughput(inputs: Path, deadline: float, configs: list[str] | None = None) 
     ns_est = 1.5  # ns per particle-step (measured on an H100, 2026-11-26) until measured
     plan = [(n, c, 128) for n in SIZES for c in COUNTS]
     plan += [(800, 10_000, t) for t in BLOCKS if t != 128]
-    if configs:
+    if configs:  # SPHERESxRVESxTHREADS[xMAX_REGISTERS]
         plan = [tuple(int(v) for v in c.split("x")) for c in configs]
     plan.sort(key=lambda p: p[0] * p[1])
-    for n, count, threads in plan:
+    for n, count, threads, *regs in plan:
         base, cp, dt = load(inputs, n)
         steps = int(np.clip(0.4 / (count * n * ns_est * 1e-9), 10, 50))
         predicted = 5 * count * n * steps * ns_est * 1e-9 + 3e-7 * count * n  # + copies
@@ -228,7 +240,8 @@ def throughput(inputs: Path, deadline: float, configs: list[str] | None = None) 
             continue
         try:
             r = measure(base, cp, dt, count, threads, steps,
-                        per_call=(count == 10_000 and threads == 128))
+                        per_call=per_call and count == 10_000 and threads == 128,
+                        regs=regs[0] if regs else None)
             ns_est = max(r["ns_per_particle_step"], 0.05)
         except Exception as err:
             r = {"rves": count, "particles": n, "threads": threads,
@@ -236,6 +249,54 @@ def throughput(inputs: Path, deadline: float, configs: list[str] | None = None) 
         rows.append(r)
         print(json.dumps(r), flush=True)
     return rows
+
+
+def baseline(src: Path, inputs: Path, configs: list[str], out: Path, budget: float) -> dict:
+    """The throughput of `configs` with the grainscale of `src` (another version's src/),
+    in a subprocess of this script: a ratio against this version's figures is then a
+    comparison on one GPU in one lease."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(src.resolve())] + os.environ.get("PYTHONPATH", "").split(os.pathsep)[1:]))
+    run = subprocess.run([sys.executable, __file__, "--inputs", str(inputs), "--out",
+                          str(out), "--skip", "tests", "column", "--budget", str(budget),
+                          "--no-per-call",
+                          "--configs", *configs], env=env, capture_output=True, text=True,
+                         timeout=budget + 60)
+    res = {"returncode": run.returncode, "src": str(src)}
+    report = out / "gpu_check.json"
+    if report.exists():
+        res["throughput"] = json.loads(report.read_text()).get("throughput")
+    if run.returncode != 0:
+        res["tail"] = (run.stdout + run.stderr)[-2000:]
+    return res
+
+
+def _profiled_call(inputs: Path, config: str) -> None:
+    """Two calls of one configuration (the target of `profile`'s ncu)."""
+    n, count, threads = (int(v) for v in config.split("x"))
+    base, cp, dt = load(inputs, n)
+    measure(base, cp, dt, count, threads, 10, per_call=False)
+
+
+def profile(inputs: Path, config: str, out: Path, budget: float) -> dict:
+    """ncu on the batch kernel's second launch of `config` (see the module docstring)."""
+    ncu = shutil.which("ncu") or next(
+        (str(p) for p in sorted(Path("/opt/nvidia").glob("nsight-compute/*/ncu"))), None)
+    if ncu is None:
+        return {"error": "ncu not found"}
+    sections = ("SpeedOfLight", "Occupancy", "LaunchStats", "MemoryWorkloadAnalysis",
+                "ComputeWorkloadAnalysis", "WarpStateStats", "SchedulerStats")
+    cmd = [ncu, "--clock-control", "none", "--kernel-name", "regex:advance_kernel",
+           "--launch-skip", "1", "--launch-count", "1"]
+    for s in sections:
+        cmd += ["--section", s]
+    code = (f"import sys; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); "
+            f"from gpu_check import _profiled_call; from pathlib import Path; "
+            f"_profiled_call(Path({str(inputs)!r}), {config!r})")
+    run = subprocess.run(cmd + [sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                         text=True, timeout=budget)
+    (out / "ncu.txt").write_text(run.stdout + run.stderr)
+    return {"returncode": run.returncode, "config": config, "report": "ncu.txt"}
 
 
 CLI = "import sys; from grainscale.cli import main; sys.exit(main(sys.argv[1:]))"
@@ -298,6 +359,12 @@ def main() -> None:
     ap.add_argument("--devices", nargs="+", default=["cuda", "cpu"],
                     help="devices of the column runs")
     ap.add_argument("--skip", nargs="*", default=[], help="sections to leave out")
+    ap.add_argument("--baseline", type=Path, help="another version's src/ to compare with")
+    ap.add_argument("--baseline-configs", nargs="*", default=["800x10000x128"],
+                    help="throughput configurations of the baseline section")
+    ap.add_argument("--profile", help="SPHERESxRVESxTHREADS to profile with ncu")
+    ap.add_argument("--no-per-call", action="store_true",
+                    help="leave out the per-call path's ratio at 10,000 RVEs")
     args = ap.parse_args()
     if args.prepare:
         prepare(args.prepare)
@@ -307,10 +374,19 @@ def main() -> None:
     rep.section("env", env)
     if "tests" not in args.skip:
         rep.section("tests", tests, 0.4 * args.budget)
+    # the budget's shares: the later sections' are kept back from the throughput grid
+    later = (0.5 if "column" not in args.skip else 0.05) \
+        + 0.2 * (args.baseline is not None) + 0.2 * (args.profile is not None)
     if "throughput" not in args.skip:
         rep.section("throughput", throughput, args.inputs,
-                    start + (0.45 if "column" not in args.skip else 0.95) * args.budget,
-                    args.configs)
+                    start + max(1.0 - later, 0.3) * args.budget, args.configs,
+                    not args.no_per_call)
+    if args.baseline:
+        rep.section("baseline", baseline, args.baseline, args.inputs, args.baseline_configs,
+                    args.out / "baseline", 0.2 * args.budget)
+    if args.profile:
+        rep.section("profile", profile, args.inputs, args.profile, args.out,
+                    0.2 * args.budget)
     if "column" not in args.skip:
         left = args.budget - (time.perf_counter() - start)
         rep.section("column", column, args.inputs, args.steps, max(left, 30.0),

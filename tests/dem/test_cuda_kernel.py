@@ -209,10 +209,13 @@ def test_resident_run_retiles_writes_probes_and_resumes_bitwise(sim_long):
 # Relative tolerance of the coupled runs' histories (`grainscale run --device cuda`
 # against the CPU, max |cpu - cuda| / max |cpu| per column). The kernels' round-off
 # differences (RTOL above) grow through 55-110 DEM steps of contact dynamics: observed
-# <= 2e-10 (the unit element's volumetric strain). 1e-8 leaves room for other CPUs'
-# code generation, and still catches a device that differs in physics: without the
-# kinetic stress the column's runout differed by 1e-4 and its kinetic energy by 3e-5.
-RUN_RTOL = 1e-8
+# <= 2e-10 on an H100 machine, but 1.4e-8 for the retiled column on an H200 machine,
+# with the same digits from the kernel before and after its step scratch moved per
+# block: the round-off of that machine's CPU and GPU code, not a change of physics.
+# 1e-7 leaves room for other CPUs' code generation, and still catches a device that
+# differs in physics: without the kinetic stress the column's runout differed by 1e-4
+# and its kinetic energy by 3e-5.
+RUN_RTOL = 1e-7
 
 
 @pytest.mark.parametrize("name", ["unit_element", "column"])
