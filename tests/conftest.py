@@ -22,6 +22,8 @@ import os
 import tempfile
 from pathlib import Path
 
+import pytest
+
 
 def _source_hash() -> str:
     spec = importlib.util.find_spec("grainscale")  # locates, does not import
@@ -40,3 +42,27 @@ _HASH = _source_hash()
 _TMP = Path(tempfile.gettempdir())
 os.environ.setdefault("NUMBA_CACHE_DIR", str(_TMP / "grainscale-numba-cache" / _HASH))
 os.environ.setdefault("GRAINSCALE_PACKING_STORE", str(_TMP / "grainscale-test-packings" / _HASH))
+
+
+@pytest.hookimpl(trylast=True)  # after -m and -k have deselected
+def pytest_collection_modifyitems(session, config, items):
+    """tests/dem/test_cuda_kernel.py's simulator runs start now, in the background, and
+    its tests move to the end of the session: the simulator is single-threaded Python
+    (minutes), so it overlaps the other tests instead of adding to them."""
+    cuda = [it for it in items if hasattr(getattr(it, "module", None), "start_simulator_ahead")]
+    if not cuda:
+        return
+    wanted = {name for it in cuda for name in cuda[0].module.FIXTURE_PARTS
+              if name in it.fixturenames
+              and getattr(it, "callspec", None) is not None
+              and it.callspec.params.get(name) == "simulator"}
+    items[:] = [it for it in items if it not in cuda] + cuda
+    cuda[0].module.start_simulator_ahead(wanted)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    for it in getattr(session, "items", []):
+        stop = getattr(getattr(it, "module", None), "stop_simulator_ahead", None)
+        if stop is not None:
+            stop()
+            return

@@ -45,6 +45,9 @@ def punch(size: float, cells_per_radius: int) -> dict:
     h = RADIUS / cells_per_radius
     side = size * RADIUS
     n = round(side / h)
+    if abs(n * h - side) > 1e-9 * side:  # the cube's far faces must lie on node planes
+        raise ValueError(f"size = {size}: size x cells_per_radius ({cells_per_radius}) "
+                         f"must be a whole number of cells")
     grid = Grid.make([0, 0, 0], h, [n, n, n + 2])
     x, vol = fill_box(grid, [0, 0, 0], [side, side, side], 1)
     pts = make_points(x, vol, RHO, 0)

@@ -71,6 +71,36 @@ def _env(simulator: bool) -> dict:
     return env
 
 
+# the cuda_sim_cases.py parts of each fixture, and the simulator runs started ahead
+FIXTURE_PARTS = {"sim": ("kernel",), "sim_long": ("kernel_more", "coupled")}
+_AHEAD: dict[tuple[str, ...], subprocess.Popen] = {}
+
+
+def _start(parts: tuple[str, ...], simulator: bool) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, str(HERE / "cuda_sim_cases.py"), *parts],
+                            env=_env(simulator), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=HERE)
+
+
+def start_simulator_ahead(fixtures: set[str]) -> None:
+    """Start the simulator's runs of `fixtures` (names in FIXTURE_PARTS) in the
+    background. tests/conftest.py calls this once the session's tests are selected and
+    moves this module's tests last: the simulator is single-threaded Python, so its
+    minutes overlap the other tests instead of adding to them."""
+    for name in fixtures:
+        parts = FIXTURE_PARTS[name]
+        if parts not in _AHEAD:
+            _AHEAD[parts] = _start(parts, simulator=True)
+
+
+def stop_simulator_ahead() -> None:
+    """Kill the runs started ahead that no test waited for (an interrupted session)."""
+    for proc in _AHEAD.values():
+        proc.kill()
+        proc.wait()
+    _AHEAD.clear()
+
+
 def _cases(mode: str, *parts: str) -> dict:
     """The measured differences of cuda_sim_cases.py's `parts` (one subprocess for all
     the tests of a fixture), on numba's simulator or on a real GPU if one can run a
@@ -81,10 +111,14 @@ def _cases(mode: str, *parts: str) -> dict:
     if probe.returncode != 0:
         why = [ln for ln in probe.stderr.splitlines() if "Error" in ln][-1:] or ["?"]
         pytest.skip(f"{mode}: numba.cuda cannot run a kernel here ({why[0]})")
-    run = subprocess.run([sys.executable, str(HERE / "cuda_sim_cases.py"), *parts], env=env,
-                         capture_output=True, text=True, cwd=HERE, timeout=900)
-    assert run.returncode == 0, run.stderr[-3000:]
-    res = json.loads(run.stdout.strip().splitlines()[-1])
+    proc = _AHEAD.pop(parts, None) if mode == "simulator" else None
+    proc = proc or _start(parts, simulator=mode == "simulator")
+    try:
+        stdout, stderr = proc.communicate(timeout=900)
+    finally:
+        proc.kill()  # a no-op once it has exited
+    assert proc.returncode == 0, stderr[-3000:]
+    res = json.loads(stdout.strip().splitlines()[-1])
     res["mode"] = mode
     return res
 
@@ -93,7 +127,7 @@ def _cases(mode: str, *parts: str) -> dict:
 def sim(request) -> dict:
     """The kernel's core cases: shear through list rebuilds, capacity overflow, the
     resident path; tiny batches against the CPU (under a minute on the simulator)."""
-    return _cases(request.param, "kernel")
+    return _cases(request.param, *FIXTURE_PARTS["sim"])
 
 
 @pytest.fixture(scope="module", params=["simulator", "gpu"])
@@ -101,7 +135,7 @@ def sim_long(request) -> dict:
     """The kernel's further cases (momentum, damping and idle threads, reverse-list
     overflow, spread radii) and `grainscale run --device cuda` against the CPU (minutes
     on the simulator): the validation tier."""
-    return _cases(request.param, "kernel_more", "coupled")
+    return _cases(request.param, *FIXTURE_PARTS["sim_long"])
 
 
 ARRAYS = ("s", "v", "w", "rot", "ft", "stress", "stress_servo", "stiffness", "force",
