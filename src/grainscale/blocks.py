@@ -33,7 +33,7 @@ from grainscale.io.rve_h5 import read_rve_state
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.materials import LinearElastic, MohrCoulomb
-from grainscale.mpm.points import fill_box, make_points
+from grainscale.mpm.points import fill_box, make_points, sub_cell_half_widths
 from grainscale.mpm.rigid import BOX, CYLINDER, RigidBody
 from grainscale.mpm.step import MPMState, SimulationError, step
 
@@ -74,5 +74,5 @@ __all__ = [
     "MPMState", "MohrCoulomb", "RVEBatch", "RVEMaterial", "RVEParams", "RigidBody",
     "SimulationError", "boundary", "concatenate", "fill_box", "from_packing",
     "from_state_arrays", "latest_checkpoint", "make_points", "perpendicular_widths",
-    "read_rve_state", "state_arrays", "step",
+    "read_rve_state", "state_arrays", "step", "sub_cell_half_widths",
 ]

@@ -68,7 +68,7 @@ def punch(size: float, cells_per_radius: int) -> dict:
     while s.time < end - 1e-12:
         step(s, min(s.stable_dt(), end - s.time))
     d, force = -s.rigid.displacement[2], s.rigid.force[2]
-    k_p = pts.m[0] * (s.rigid.penalty * s.rigid.wave_speed_ref / (2 * pts.lp[0])) ** 2
+    k_p = pts.m[0] * (s.rigid.penalty * s.rigid.wave_speed_ref / (2 * pts.lp[0, 2])) ** 2
     contact = s.rigid.in_contact
     stiffness = 4.0 * force / (d - force / (contact * k_p))
     return {"size": size, "points": pts.n, "in_contact": contact, "spacing": h,

@@ -190,6 +190,27 @@ def test_ranks_give_identical_history_with_tractions(tmp_path):
         assert (tmp_path / f"n{n}" / "history.csv").read_text() == ref
 
 
+@pytest.mark.validation  # 10 s: the uniform grid's rank test above is the fast one
+def test_ranks_give_identical_history_on_a_graded_grid(tmp_path):
+    """The same case on a rectilinear grid (a 2:1 step in x, z graded 1.5 per cell, so
+    points of several sizes and a stencil of 4 nodes per axis) on 1, 2 and 3 ranks:
+    the same history to the last digit."""
+    case = tmp_path / "graded.toml"
+    case.write_text(textwrap.dedent(MOHR_COULOMB).replace(
+        "cell_size = 0.05\ncells = [6, 4, 5]",
+        "nodes_x = [0.0, 0.05, 0.1, 0.15, 0.2, 0.3]\n"
+        "nodes_y = [0.0, 0.05, 0.1, 0.15, 0.2]\n"
+        "nodes_z = {lo = 0.0, hi = 0.3, cell = 0.025, fine = [0.0, 0.1], ratio = 1.5}"))
+    assert "nodes_x" in case.read_text()
+    assert main(["run", str(case), "--out", str(tmp_path / "n1"), "--quiet"]) == 0
+    ref = (tmp_path / "n1" / "history.csv").read_text()
+    assert ref.count("\n") > 5
+    for n in (2, 3):
+        r = mpirun(n, ["run", str(case), "--out", str(tmp_path / f"n{n}"), "--quiet"])
+        assert r.returncode == 0, r.stderr
+        assert (tmp_path / f"n{n}" / "history.csv").read_text() == ref
+
+
 INJECT = """
 import sys
 from mpi4py import MPI

@@ -113,6 +113,42 @@ def test_penalty_plate_on_elastic_block_gives_the_series_stiffness():
     assert np.all(np.abs(s.rigid.force[:2]) < 1e-9 * abs(s.rigid.force[2]))
 
 
+def test_penalty_plate_on_a_graded_grid_gives_the_series_stiffness():
+    """The same plate and block on a rectilinear grid: x and y cells of 0.05, 0.05 and
+    0.1 m, z cells of 0.1, 0.05 and 0.05 m up to the top, so the points under the plate
+    have box domains (half-widths 0.0125-0.025 m across, 0.0125 m along z) and two
+    masses. The contact springs take the half-extent along the normal, l_z, so
+    k_p = kappa m_p (c / 2 l_z)^2 per point and F = d / ((H - l_z)/(M A) + 1/sum k_p),
+    within 1 % as on the uniform grid."""
+    from grainscale.mpm.materials import LinearElastic
+    from grainscale.mpm.points import make_points, sub_cell_half_widths
+    from grainscale.mpm.step import MPMState
+
+    H, a, E, nu, rho = 0.2, 0.2, 1e6, 0.3, 1000.0
+    xy = [0.0, 0.05, 0.1, 0.2]
+    grid = Grid.rectilinear([xy, xy, [0.0, 0.1, 0.15, 0.2, 0.25, 0.3]])
+    x, vol = fill_box(grid, [0, 0, 0], [a, a, H], 2)
+    pts = make_points(x, vol, rho, 0, lp=sub_cell_half_widths(grid, x, 2))
+    mat = LinearElastic("m", pts.n, density=rho, youngs_modulus=E, poisson_ratio=nu)
+    s = MPMState(grid=grid, points=pts, materials=[mat], mat_points=[None], damping=0.3)
+    s.constraints = rollers(grid, ["x-", "x+", "y-", "y+"]) + [
+        boundary.constraint(boundary.face_nodes(grid, "z-"), "fixed", None)]
+    s.rigid = _penalty_plate([-0.1, -0.1, H], [a + 0.1, a + 0.1, H + 0.05], [0, 0, -2e-3],
+                             0.3)
+    top = pts.x[:, 2] == pts.x[:, 2].max()
+    assert len(np.unique(pts.m[top])) == 3  # 0.05 x 0.05, 0.05 x 0.1 and 0.1 x 0.1 cells
+    run(s, 0.45)
+    d = -s.rigid.displacement[2]
+    M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
+    c = np.sqrt(M / rho)
+    lz = 0.0125
+    np.testing.assert_allclose(pts.lp[top, 2], lz)
+    k_p = pts.m[top] * (c / (2 * lz)) ** 2
+    assert s.rigid.in_contact == top.sum()
+    expected = d / ((H - lz) / (M * a * a) + 1.0 / k_p.sum())
+    np.testing.assert_allclose(s.rigid.force[2], expected, rtol=0.01)
+
+
 def test_penalty_reaction_is_the_impulse_the_material_receives():
     """Undamped layer under gravity on a rising penalty plate, frictionless rollers at
     the sides: the material's momentum changes each step by the impulse of gravity and
@@ -147,7 +183,7 @@ def test_penalty_contact_never_pulls_and_friction_opposes_slip():
     x = np.array([[0.5, 0.5, 1.05], [0.5, 0.5, 1.2], [0.5, 0.5, 1.05]])  # above the top
     v = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [2.0, 0.0, 0.0]])
     m = np.ones(3)
-    lp = np.full(3, 0.1)
+    lp = np.full((3, 3), 0.1)  # cubes: half-width 0.1 m on every axis
     ids, out, where = np.empty(3, dtype=np.int64), np.empty((3, 3)), np.empty((3, 3))
     dt = 0.01
     n = penalty_kernel(BOX, geom, np.zeros(3), x, v, m, lp, 4.0, 0.0, 0.5, dt, ids, out, where)
@@ -160,6 +196,30 @@ def test_penalty_contact_never_pulls_and_friction_opposes_slip():
     v[2] = [0.05, 0.0, 0.0]
     penalty_kernel(BOX, geom, np.zeros(3), x, v, m, lp, 4.0, 0.0, 0.5, dt, ids, out, where)
     np.testing.assert_allclose(out[1], [-5.0, 0.0, fn])
+
+
+def test_penalty_contact_of_a_box_domain_uses_its_extent_along_the_normal():
+    """A point with a box domain (a graded grid's sub-cell, half-widths 0.2, 0.2, 0.06 m)
+    at 0.05 m above a face: along z it reaches 0.06 m (in contact by 0.01 m, its spring
+    m omega2 / 0.06^2), not its 0.2 m in x and y; beside a side face (normal x) at
+    0.15 m it reaches 0.2 m. An oblique normal n gets sqrt(sum (l_a n_a)^2)
+    (points.half_extent), which is l for a cube."""
+    from grainscale.mpm.points import half_extent
+    from grainscale.mpm.rigid import penalty_kernel
+
+    geom = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0])  # unit box
+    x = np.array([[0.5, 0.5, 1.05], [1.15, 0.5, 0.5]])  # above the top, beside x+
+    lp = np.array([[0.2, 0.2, 0.06], [0.2, 0.2, 0.06]])
+    ids, out, where = np.empty(2, dtype=np.int64), np.empty((2, 3)), np.empty((2, 3))
+    n = penalty_kernel(BOX, geom, np.zeros(3), x, np.zeros((2, 3)), np.ones(2), lp, 4.0,
+                       0.0, 0.0, 0.01, ids, out, where)
+    assert n == 2
+    np.testing.assert_allclose(out[0], [0.0, 0.0, 4.0 / 0.06 ** 2 * 0.01])
+    np.testing.assert_allclose(where[0], [0.5, 0.5, 0.99])
+    np.testing.assert_allclose(out[1], [4.0 / 0.2 ** 2 * 0.05, 0.0, 0.0])
+    d = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+    np.testing.assert_allclose(half_extent(lp[:1], d), np.sqrt((0.04 + 0.0036) / 2))
+    assert half_extent(np.full((1, 3), 0.1), d)[0] == 0.1
 
 
 def test_cross_section_and_its_radius():

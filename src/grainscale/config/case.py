@@ -34,12 +34,97 @@ Face = Literal["x-", "x+", "y-", "y+", "z-", "z+"]
 FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is given
 
 
+class GradedAxisCfg(StrictModel):
+    """One axis of a rectilinear grid written concisely (mpm/rectilinear.graded_axis):
+    cells of `cell` over `fine`, growing by `ratio` per cell away from it, up to
+    `max_cell`, scaled to end exactly at lo and hi."""
+    lo: float  # m, first node
+    hi: float  # m, last node
+    cell: Pos  # m, the cell size over `fine`
+    fine: tuple[float, float] | None = None  # m, the interval of cells `cell` (default [lo, hi])
+    ratio: Annotated[float, Field(ge=1)] = 1.0  # size ratio of neighbouring cells outside it
+    max_cell: Pos | None = None  # m, the largest cell (default: no limit)
+
+    def nodes(self):
+        from grainscale.mpm.rectilinear import graded_axis
+
+        lo, hi = self.fine if self.fine is not None else (self.lo, self.hi)
+        return graded_axis(self.lo, self.hi, lo, hi, self.cell, self.ratio, self.max_cell)
+
+
+NODE_KEYS = ("nodes_x", "nodes_y", "nodes_z")
+
+
 class GridCfg(StrictModel):
+    """A uniform grid (origin, cell_size, cells) or a rectilinear one (nodes_x, nodes_y,
+    nodes_z: node coordinates, or a graded axis each)."""
     origin: Vec3 = (0.0, 0.0, 0.0)  # m, position of the first node
-    cell_size: Pos | tuple[Pos, Pos, Pos]  # m, one value (cubic cells) or one per axis
+    cell_size: Pos | tuple[Pos, Pos, Pos] | None = None  # m, one value or one per axis
     cells: tuple[Annotated[int, Field(ge=1)], Annotated[int, Field(ge=1)],
-                 Annotated[int, Field(ge=1)]]  # cells per axis
+                 Annotated[int, Field(ge=1)]] | None = None  # cells per axis
+    nodes_x: list[float] | GradedAxisCfg | None = None  # m, increasing node coordinates
+    nodes_y: list[float] | GradedAxisCfg | None = None
+    nodes_z: list[float] | GradedAxisCfg | None = None
     periodic: list[Axis] = []  # axes along which material leaving one end re-enters
+
+    @field_validator(*NODE_KEYS)
+    @classmethod
+    def _nodes(cls, v, info):
+        if v is None:
+            return v
+        from grainscale.mpm.rectilinear import check_nodes
+
+        key = f"grid.{info.field_name}"
+        try:
+            check_nodes(v.nodes() if isinstance(v, GradedAxisCfg) else v, key)
+        except ValueError as err:  # graded_axis names its own argument: add the key
+            msg = str(err)
+            raise ValueError(msg if msg.startswith(key) else f"{key}: {msg}") from None
+        return v
+
+    @model_validator(mode="after")
+    def _one_form(self):
+        lists = [k for k in NODE_KEYS if getattr(self, k) is not None]
+        if lists:
+            uniform = [k for k in ("cell_size", "cells") if getattr(self, k) is not None]
+            if "origin" in self.model_fields_set:
+                uniform.insert(0, "origin")
+            if len(lists) != 3:
+                missing = [k for k in NODE_KEYS if k not in lists]
+                raise ValueError(f"grid.{lists[0]} is given but not grid.{missing[0]}: a "
+                                 "rectilinear grid needs nodes_x, nodes_y and nodes_z")
+            if uniform:
+                raise ValueError(f"grid.{uniform[0]} with grid.nodes_x/y/z: give either "
+                                 "origin, cell_size and cells (a uniform grid) or the node "
+                                 "coordinates of each axis, not both")
+            if self.periodic:
+                raise ValueError(f"grid.periodic = {self.periodic} with node lists: periodic "
+                                 "axes need a uniform grid (origin, cell_size, cells)")
+        elif self.cell_size is None or self.cells is None:
+            missing = "cell_size" if self.cell_size is None else "cells"
+            raise ValueError(f"grid.{missing} is missing: a uniform grid needs cell_size and "
+                             "cells (or give nodes_x, nodes_y and nodes_z)")
+        return self
+
+    def axes(self):
+        """The node coordinates of each axis (3 arrays, m), or None for a uniform grid."""
+        if self.nodes_x is None:
+            return None
+        import numpy as np
+
+        return [np.asarray(v.nodes() if isinstance(v, GradedAxisCfg) else v, dtype=float)
+                for v in (self.nodes_x, self.nodes_y, self.nodes_z)]
+
+    def extent(self) -> tuple[list[float], list[float], list[int]]:
+        """(first node, last node, cells) per axis."""
+        axes = self.axes()
+        if axes is not None:
+            return ([float(a[0]) for a in axes], [float(a[-1]) for a in axes],
+                    [len(a) - 1 for a in axes])
+        size = self.cell_size if isinstance(self.cell_size, tuple) else (self.cell_size,) * 3
+        return (list(self.origin),
+                [o + n * h for o, n, h in zip(self.origin, self.cells, size, strict=True)],
+                list(self.cells))
 
 
 class SolverCfg(StrictModel):
@@ -601,9 +686,10 @@ def check_case(case: Case) -> None:
         if b.material not in case.materials:
             raise ConfigError(f"bodies[{i}].material = {b.material!r}: no such material; "
                               f"defined: {names}")
-    if case.solver.shape == "GIMP" and min(case.grid.cells) < 2:
-        raise ConfigError(f"grid.cells = {list(case.grid.cells)}: GIMP needs >= 2 cells "
-                          "per axis (or use solver.shape = 'linear')")
+    cells = case.grid.extent()[2]
+    if case.solver.shape == "GIMP" and min(cells) < 2:
+        raise ConfigError(f"grid.cells = {cells}: GIMP needs >= 2 cells per axis (or use "
+                          "solver.shape = 'linear')")
     for i, bc in enumerate(case.boundaries):
         if bc.face is not None and bc.face[0] in case.grid.periodic:
             raise ConfigError(f"boundaries[{i}].face = {bc.face!r}: grid.periodic = "
@@ -656,16 +742,13 @@ def _check_probes(case: Case) -> None:
                           "shows the RVE of a material point of a 'dem' material, and this "
                           f"case has none (materials: {kinds}); valid: a case with a "
                           "material of type = 'dem', or no [[output.probes]]")
-    g = case.grid
-    size = g.cell_size if isinstance(g.cell_size, tuple) else (g.cell_size,) * 3
-    lo = list(g.origin)
-    hi = [o + n * h for o, n, h in zip(g.origin, g.cells, size, strict=True)]
+    lo, hi, _ = case.grid.extent()
     first: dict[str, int] = {}
     for i, p in enumerate(probes):
         if not all(a <= x <= b for a, x, b in zip(lo, p.position, hi, strict=True)):
             raise ConfigError(f"output.probes[{i}].position = {list(p.position)}: outside the "
-                              f"grid; valid range {lo} .. {hi} (grid.origin .. grid.origin + "
-                              "grid.cells * grid.cell_size)")
+                              f"grid; valid range {lo} .. {hi} (the grid's first and last "
+                              "nodes)")
         if p.name in first:
             raise ConfigError(f"output.probes[{i}].name = {p.name!r}: already the name of "
                               f"output.probes[{first[p.name]}] (unnamed probes are called "

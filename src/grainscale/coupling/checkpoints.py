@@ -201,7 +201,8 @@ def load_rows(s: MPMState, sources) -> bool:
         return False
     order = np.argsort(found)
     for k in point_parts[0]:
-        getattr(s.points, k)[...] = np.concatenate([p[k] for p in point_parts])[order]
+        a, into = np.concatenate([p[k] for p in point_parts])[order], getattr(s.points, k)
+        into[...] = a if a.ndim == into.ndim else a[:, None]  # lp (P,) of older checkpoints
     for i, m in enumerate(s.materials):
         merge = getattr(m, "merge_states", None)
         state = merge(mat_parts[i]) if merge else {

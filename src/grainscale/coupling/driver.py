@@ -2,6 +2,7 @@
 
 Outputs in --out: `case.resolved.toml` (every default filled in, package version),
 `history.csv` (a row every output.interval, plus a final row when the run stops),
+`grid.vtr` (the background grid, uniform or graded, for ParaView),
 `frames/frame_NNNNN.vtu` + `frames.pvd` (and `frames/rigid_NNNNN.vtu` + `rigid.pvd`
 for a rigid body), the probes' RVEs at the frame times (`probes.json`,
 `frames/probe_NAME_NNNNN_*.vtu` + `probe_NAME_*.pvd`, coupling/probes.py), `cost.json`
@@ -46,7 +47,7 @@ from grainscale.distributed.comm import Comm, world
 from grainscale.io import faults
 from grainscale.io.history import History, HistoryMismatch
 from grainscale.io.progress import Progress
-from grainscale.io.vtk import PVDSeries, write_points_vtu
+from grainscale.io.vtk import PVDSeries, write_grid_vtr, write_points_vtu
 from grainscale.mpm.materials import KINDS
 from grainscale.mpm.setup import build_state
 from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError, step
@@ -246,6 +247,7 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     if root:
         (out / "frames").mkdir(exist_ok=True)
         (out / "case.resolved.toml").write_text(resolved_toml(case))
+        write_grid_vtr(out / "grid.vtr", s.grid.node_axes())
 
     columns = ["step", *case.output.history]
     o = case.output

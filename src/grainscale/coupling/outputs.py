@@ -82,10 +82,10 @@ def history_values(case: Case, s: MPMState, pts: Points,
     col = case.output.column
     if col is not None:
         fa, ua = AXES[col.flow_axis], AXES[col.up_axis]
-        edge = pts.x[:, fa] + pts.lp  # particle-domain edge, so the initial runout is 0
+        edge = pts.x[:, fa] + pts.lp[:, fa]  # particle-domain edge: the initial runout is 0
         front = float(np.quantile(edge, col.front_quantile)) if col.front_quantile < 1 \
             else float(edge.max())
-        height = float((pts.x[:, ua] + pts.lp).max()) - col.base
+        height = float((pts.x[:, ua] + pts.lp[:, ua]).max()) - col.base
         g = float(np.linalg.norm(case.solver.gravity))
         out.update(front=front, column_height=height,
                    runout_ratio=(front - col.wall - col.length) / col.length,
@@ -93,8 +93,8 @@ def history_values(case: Case, s: MPMState, pts: Points,
                    t_over_tc=s.time / math.sqrt(col.height / g) if g > 0 else math.nan)
         if col.min_thickness > 0.0:
             # bins one point spacing (2 l_p) wide
-            edges, thick = deposit_profile(pts.x[:, fa], pts.x[:, ua], pts.lp,
-                                           2.0 * float(np.median(pts.lp)), col.base)
+            edges, thick = deposit_profile(pts.x[:, fa], pts.x[:, ua], pts.lp[:, ua],
+                                           2.0 * float(np.median(pts.lp[:, fa])), col.base)
             front = front_at_thickness(edges, thick, col.min_thickness)
             out.update(front_thick=front,
                        runout_ratio_thick=(front - col.wall - col.length) / col.length)

@@ -47,6 +47,25 @@ def write_points_vtu(path: str | Path, points: np.ndarray,
     faults.point("vtu.renamed")
 
 
+def write_grid_vtr(path: str | Path, axes) -> None:
+    """The background grid as a VTK XML RectilinearGrid (.vtr): the node coordinates of
+    each axis (3 arrays, m), uniform or graded, for ParaView to draw under the points."""
+    path = Path(path)
+    axes = [np.asarray(a, dtype=np.float64) for a in axes]
+    extent = " ".join(f"0 {len(a) - 1}" for a in axes)
+    coords = "\n".join(
+        f'<DataArray type="Float64" Name="{n}" format="ascii">'
+        f'{" ".join(repr(float(v)) for v in a)}</DataArray>'
+        for n, a in zip("xyz", axes, strict=True))
+    text = (f'<?xml version="1.0"?>\n<VTKFile type="RectilinearGrid" version="0.1" '
+            f'byte_order="LittleEndian">\n<RectilinearGrid WholeExtent="{extent}">\n'
+            f'<Piece Extent="{extent}">\n<Coordinates>\n{coords}\n</Coordinates>\n'
+            "</Piece>\n</RectilinearGrid>\n</VTKFile>\n")
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    _atomic_replace(tmp, path)
+
+
 def read_points_vtu(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Points (P,3) and per-point fields of a .vtu written by write_points_vtu (tensor
     fields come back flattened, (P,9))."""

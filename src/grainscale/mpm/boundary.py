@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grainscale.mpm.grid import Grid
+from grainscale.mpm.points import half_extent
 
 FACES = {"x-": (0, 0), "x+": (0, 1), "y-": (1, 0), "y+": (1, 1), "z-": (2, 0), "z+": (2, 1)}
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -226,7 +227,7 @@ def traction_loads(tractions: list[Traction], time: float, x: np.ndarray, lp: np
         if k == 0.0:
             continue
         force = t.force
-        offset = lp[t.points]
+        offset = half_extent(lp[t.points], t.normal)
         if t.current_area and F is not None and len(t.points):
             Fp = F[t.points]
             force = force * area_ratio(Fp, t.normal)[:, None]

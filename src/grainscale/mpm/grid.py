@@ -122,10 +122,17 @@ class Grid:
             return np.array([a[-1] for a in self.axes])
         return self.origin + self.cells * self.cell_size
 
+    def node_axes(self) -> list[np.ndarray]:
+        """The node coordinates of each axis (3 arrays, m; a periodic axis' padding
+        included)."""
+        if self.axes is not None:
+            return [np.asarray(a) for a in self.axes]
+        return [self.origin[a] + np.arange(self.nodes[a]) * self.cell_size[a]
+                for a in range(3)]
+
     def node_positions(self) -> np.ndarray:
         """(n_nodes, 3) positions, in node numbering order."""
-        axes = self.axes or [self.origin[a] + np.arange(self.nodes[a]) * self.cell_size[a]
-                             for a in range(3)]
+        axes = self.node_axes()
         z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
         return np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
 

@@ -27,7 +27,7 @@ class Points:
     vol: np.ndarray  # (P,) m^3, current volume = det(F) vol0
     F: np.ndarray  # (P,3,3) deformation gradient, F[a, b] = d x_a / d X_b
     stress: np.ndarray  # (P,3,3) Pa, Cauchy stress, tension positive
-    lp: np.ndarray  # (P,) m, GIMP half-width (constant: "undeformed" uGIMP)
+    lp: np.ndarray  # (P,3) m, GIMP half-width per axis (constant: "undeformed" uGIMP)
     mat: np.ndarray  # (P,) int64, material index
 
     @property
@@ -40,7 +40,9 @@ class Points:
 
 def make_points(x: np.ndarray, vol: np.ndarray, density: float, mat: int,
                 velocity=(0.0, 0.0, 0.0), lp: np.ndarray | None = None) -> Points:
-    """Points at x (P,3) with volumes vol (P,); l_p defaults to half the cube root of vol."""
+    """Points at x (P,3) with volumes vol (P,). Half-widths lp: one value, one per point
+    (P,) (a cube) or one per point and axis (P,3) (a box, as a sub-cell of a graded
+    grid); default half the cube root of vol."""
     x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
     P = x.shape[0]
     vol = np.ascontiguousarray(np.broadcast_to(vol, (P,)), dtype=np.float64).copy()
@@ -51,9 +53,29 @@ def make_points(x: np.ndarray, vol: np.ndarray, density: float, mat: int,
         v=np.tile(np.asarray(velocity, dtype=np.float64), (P, 1)), C=np.zeros((P, 3, 3)),
         m=density * vol, vol0=vol.copy(), vol=vol.copy(),
         F=np.tile(np.eye(3), (P, 1, 1)), stress=np.zeros((P, 3, 3)),
-        lp=np.ascontiguousarray(np.broadcast_to(lp, (P,)), dtype=np.float64).copy(),
+        lp=half_widths(lp, P),
         mat=np.full(P, mat, dtype=np.int64),
     )
+
+
+def half_widths(lp, P: int) -> np.ndarray:
+    """lp as (P,3) half-widths [m]: a scalar or (P,) is the same on every axis."""
+    lp = np.asarray(lp, dtype=np.float64)
+    if lp.ndim < 2:
+        lp = np.broadcast_to(lp.reshape(-1, 1) if lp.ndim == 1 else lp, (P, 3))
+    if lp.shape != (P, 3):
+        raise ValueError(f"lp: shape {lp.shape}; valid: (), ({P},) or ({P}, 3)")
+    return np.ascontiguousarray(lp).copy()
+
+
+def half_extent(lp: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Half-extent [m] of box domains lp (P,3) along unit normals n (3,) or (P,3): the
+    support function sqrt(sum_a (lp_a n_a)^2) of the inscribed ellipsoid, which is lp
+    itself for a cube (taken as is, so that cubic domains give the same digits as a
+    scalar half-width)."""
+    lp = np.asarray(lp)
+    cube = (lp[:, 0] == lp[:, 1]) & (lp[:, 1] == lp[:, 2])
+    return np.where(cube, lp[:, 0], np.sqrt(((lp * n) ** 2).sum(axis=1)))
 
 
 def concatenate(sets: list[Points]) -> Points:
@@ -103,6 +125,22 @@ def _lattice_rectilinear(grid: Grid, lo, hi, n: int) -> tuple[np.ndarray, np.nda
     W = np.meshgrid(*widths, indexing="ij")
     x = np.stack([c.ravel() for c in C], axis=1)
     return x, (W[0] * W[1] * W[2]).ravel()
+
+
+def sub_cell_half_widths(grid: Grid, x: np.ndarray, n: int) -> np.ndarray:
+    """(P,3) half-widths [m] of the sub-cells (n per cell and axis, as fill_box makes)
+    centred at x (P,3): half the size of the local cell over n, per axis. On a graded
+    grid a sub-cell is a box, not a cube, and GIMP needs its own extent on each axis (an
+    isotropic 0.5 V^(1/3) overlaps its neighbours along the fine axis)."""
+    x = np.asarray(x, dtype=np.float64).reshape(-1, 3)
+    if grid.axes is None:
+        return np.tile(0.5 * grid.cell_size / n, (x.shape[0], 1))
+    out = np.empty(x.shape)
+    for a in range(3):
+        X = np.asarray(grid.axes[a])
+        c = np.clip(np.searchsorted(X, x[:, a], side="right") - 1, 0, len(X) - 2)
+        out[:, a] = 0.5 * np.diff(X)[c] / n
+    return out
 
 
 def fill_box(grid: Grid, lo, hi, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,6 +1,6 @@
 """Rectilinear (tensor-product) grids: node coordinates per axis, graded axes, and the
 linear and GIMP shape functions on cells of unequal size (docs/mpm.md: graded grids;
-Grid.rectilinear; the case file's [grid] does not take node lists yet).
+Grid.rectilinear; the case file's [grid] nodes_x, nodes_y, nodes_z).
 
 A rectilinear grid has, along each axis a, strictly increasing node coordinates
 X_0 < X_1 < ... < X_n (ParaView's RectilinearGrid); cell c spans [X_c, X_c+1]. Node I's
@@ -11,7 +11,8 @@ linear hat N_I rises over its left cell (width h_L) and falls over its right one
 The boundary nodes keep the value 1 outside the grid (the weight of the missing nodes
 folded onto the wall, as on the uniform grid, mpm/shape.py). GIMP (Bardenhagen & Kober
 2004, the S_Ip of seed Eq. 4-6) is the hat averaged over the point's domain
-[x_p - l_p, x_p + l_p], whose half-width l_p is the point's own wherever it goes:
+[x_p - l_p, x_p + l_p], whose half-width l_p (on this axis) is the point's own wherever
+it goes:
 
     S_I(x_p) = (H_I(x_p + l_p) - H_I(x_p - l_p)) / (2 l_p),
     dS_I/dx_p = (N_I(x_p + l_p) - N_I(x_p - l_p)) / (2 l_p),
@@ -200,25 +201,29 @@ def weights_1d(nodes, x, lp, ns, base, w, dw):
             dw[p, k] = g
 
 
-def stencil(axes, lp_max: float, gimp: bool = True) -> int:
-    """Nodes per axis of the stencil on the grid `axes` for half-widths up to lp_max (the
-    widest of the three axes; at most every node of the shortest axis)."""
-    l = lp_max if gimp else 0.0
-    return min(max(stencil_width(np.asarray(a), l) for a in axes), min(len(a) for a in axes))
+def stencil(axes, lp_max, gimp: bool = True) -> int:
+    """Nodes per axis of the stencil on the grid `axes` for half-widths up to lp_max (one
+    value, or one per axis): the widest of the three axes', at most every node of the
+    shortest axis."""
+    l = np.broadcast_to(np.asarray(lp_max, dtype=np.float64) if gimp else 0.0, (3,))
+    return min(max(stencil_width(np.asarray(a), float(l[i])) for i, a in enumerate(axes)),
+               min(len(a) for a in axes))
 
 
 def evaluate(x: np.ndarray, lp: np.ndarray, axes, gimp: bool = True, out=None):
-    """Shape functions of points x (P,3) with half-widths lp (P,) on the rectilinear grid
+    """Shape functions of points x (P,3) with half-widths lp (P,3) on the rectilinear grid
     of node coordinates `axes` (three arrays): (base (P,3) int64, w and dw (P,3,ns)),
     the layout of mpm/shape.py with ns nodes per axis; gimp=False: the linear hats.
     `out` may pass (base, w, dw) to fill, ns = w.shape[2] (at least `stencil`)."""
     P = x.shape[0]
-    l = np.ascontiguousarray(lp if gimp else np.zeros(P), dtype=np.float64)
+    if np.ndim(lp) < 2:  # one half-width per point: the same on every axis
+        lp = np.broadcast_to(np.reshape(lp, (-1, 1)) if np.ndim(lp) else lp, (P, 3))
+    l = np.ascontiguousarray(lp if gimp else np.zeros((P, 3)), dtype=np.float64)
     if out is None:
-        ns = stencil(axes, float(l.max()) if P else 0.0)
+        ns = stencil(axes, l.max(axis=0) if P else 0.0)
         out = (np.empty((P, 3), dtype=np.int64), np.empty((P, 3, ns)), np.empty((P, 3, ns)))
     base, w, dw = out
     for a in range(3):  # each axis written in place through strided views
-        weights_1d(np.asarray(axes[a], dtype=np.float64), x[:, a], l, w.shape[2],
+        weights_1d(np.asarray(axes[a], dtype=np.float64), x[:, a], l[:, a], w.shape[2],
                    base[:, a], w[:, a], dw[:, a])
     return base, w, dw

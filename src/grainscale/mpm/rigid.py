@@ -123,15 +123,21 @@ def penalty_kernel(kind, geom, vbody, x, v, m, lp, omega2, damping_ratio, fricti
     """Penalty contact forces (see the module docstring) on the points in contact: their
     ids, the force on each [N] and where it acts, the point's face toward the body
     x_p - l_p n [m], written to the first `count` rows of ids, force and where.
-    omega2 = kappa (c_ref / 2)^2 [m^2/s^2], so k_p = m_p omega2 / l_p^2. Returns count."""
+    omega2 = kappa (c_ref / 2)^2 [m^2/s^2], so k_p = m_p omega2 / l_p^2. l_p is the
+    domain's half-extent along n (points.half_extent): its half-width for a cube, else
+    sqrt(sum_a (lp_a n_a)^2) of the box lp (P,3). Returns count."""
     n = np.empty(3)
     count = 0
     for p in range(x.shape[0]):
         phi = signed_distance(kind, geom, x[p], n)
-        g = lp[p] - phi
+        l = lp[p, 0]
+        if lp[p, 1] != l or lp[p, 2] != l:
+            l = math.sqrt((lp[p, 0] * n[0]) ** 2 + (lp[p, 1] * n[1]) ** 2
+                          + (lp[p, 2] * n[2]) ** 2)
+        g = l - phi
         if g <= 0.0:
             continue
-        k = m[p] * omega2 / (lp[p] * lp[p])
+        k = m[p] * omega2 / (l * l)
         rel0 = v[p, 0] - vbody[0]
         rel1 = v[p, 1] - vbody[1]
         rel2 = v[p, 2] - vbody[2]
@@ -147,7 +153,7 @@ def penalty_kernel(kind, geom, vbody, x, v, m, lp, omega2, damping_ratio, fricti
         force[count, 1] = fn * n[1] - ft * t1
         force[count, 2] = fn * n[2] - ft * t2
         for a in range(3):
-            where[count, a] = x[p, a] - lp[p] * n[a]
+            where[count, a] = x[p, a] - l * n[a]
         count += 1
     return count
 

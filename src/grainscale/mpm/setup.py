@@ -24,6 +24,7 @@ from grainscale.mpm.points import (
     fill_cylinder,
     make_points,
     read_points,
+    sub_cell_half_widths,
     take,
 )
 from grainscale.mpm.rigid import BOX, CYLINDER, RigidBody, cross_section
@@ -41,7 +42,7 @@ def _check_extent(grid: Grid, lo, hi, key: str) -> None:
         raise ConfigError(
             f"{key}: extends from {lo.tolist()} to {hi.tolist()}, outside the grid; valid "
             f"range {glo.tolist()} .. {ghi.tolist()} "
-            "(grid.origin .. grid.origin + grid.cells * grid.cell_size); set "
+            "(the grid's first and last nodes); set "
             "clip_to_grid = true to keep only the part inside (symmetry planes)")
 
 
@@ -77,6 +78,8 @@ def _body_points(grid: Grid, body, i: int, case_dir: Path):
 
 def build_grid(case: Case) -> Grid:
     g = case.grid
+    if g.axes() is not None:
+        return Grid.rectilinear(g.axes())
     return Grid.make(g.origin, g.cell_size, g.cells,
                      periodic=[a in g.periodic for a in ("x", "y", "z")])
 
@@ -112,9 +115,12 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
             raise ConfigError(
                 f"bodies[{i}]: {int(out.sum())} material point(s) outside the grid, e.g. at "
                 f"{x[out][0].tolist()}; valid range {lo.tolist()} .. {hi.tolist()} "
-                "(grid.origin .. grid.origin + grid.cells * grid.cell_size)")
+                "(the grid's first and last nodes)")
         mcfg = case.materials[body.material]
-        lp = np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min())
+        if grid.axes is not None and body.shape != "file":  # box-shaped sub-cells
+            lp = sub_cell_half_widths(grid, x, body.points_per_cell)
+        else:
+            lp = np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min())
         sets.append(make_points(x, vol, mcfg.density, names.index(body.material),
                                 velocity=body.velocity, lp=lp))
     everything = concatenate(sets)

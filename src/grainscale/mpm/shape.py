@@ -26,6 +26,7 @@ from numba import njit
 
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.parallel import CHUNK, parallel_for
+from grainscale.mpm.points import half_widths
 
 GIMP = "GIMP"
 LINEAR = "linear"
@@ -55,7 +56,7 @@ def _gimp_1d(r, h, lp):
 def _evaluate_point(p, x, origin, h, cells, lp, ns, base, w, dw):
     for a in range(3):
         ha = h[a]
-        l = lp[p] if ns == 3 else 0.0
+        l = lp[p, a] if ns == 3 else 0.0
         xi = (x[p, a] - origin[a]) / ha
         # first node whose support (|r| < h + l) can contain the point
         if ns == 2:
@@ -84,7 +85,8 @@ def _evaluate_task(t, nt, x, origin, h, cells, lp, ns, base, w, dw):
 
 
 def evaluate_kernel(x, origin, h, cells, lp, ns, base, w, dw):
-    """Fill base (P,3) int64, w and dw (P,3,3) for points x (P,3) with half-widths lp (P,)."""
+    """Fill base (P,3) int64, w and dw (P,3,3) for points x (P,3) with half-widths lp
+    (P,3)."""
     parallel_for(_evaluate_task, x, origin, h, cells, lp, ns, base, w, dw)
 
 
@@ -94,6 +96,8 @@ def evaluate(x: np.ndarray, lp: np.ndarray, grid: Grid, kind: str = GIMP, out=No
     `out` may pass preallocated (base, w, dw) arrays to fill (no allocation per step).
     """
     P = x.shape[0]
+    if np.ndim(lp) < 2:  # one half-width per point: the same on every axis
+        lp = half_widths(lp, P)
     if grid.axes is not None:  # rectilinear: a stencil as wide as the widest domain needs
         from grainscale.mpm import rectilinear
 

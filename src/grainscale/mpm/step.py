@@ -88,7 +88,8 @@ class MPMState:
         if self.grid.axes is not None:  # rectilinear: from the widest point domain
             from grainscale.mpm.rectilinear import stencil
 
-            lp_max = float(self.comm.max([float(self.points.lp.max()) if P else 0.0])[0])
+            local = self.points.lp.max(axis=0) if P else np.zeros(3)
+            lp_max = np.asarray(self.comm.max([float(v) for v in local]))  # per axis
             self.ns = slots = stencil(self.grid.axes, lp_max, self.shape == GIMP)
             if self.grid.periodic.any():
                 raise ValueError("periodic axes on a rectilinear grid: not supported")
