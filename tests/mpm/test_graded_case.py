@@ -164,3 +164,25 @@ def test_the_seed_mesh_cases_load_with_the_seeds_resolution(name):
     x, vol = fill_box(grid, body.lo, body.hi, body.points_per_cell)
     assert len(x) == 296_208
     assert vol.sum() == pytest.approx(5.0 * 5.0 * 4.0, rel=1e-12)
+
+
+def test_the_quick_seed_mesh_case_loads_with_the_seeds_near_field_cells():
+    """examples/intrusion/seed_quick.toml: quick.toml's 2 x 2 m quarter of a 1.5 m bed
+    with the seed's 0.0625 m cells over x, y <= 0.75 m and z in [0.5, 1.75] m, growing by
+    1.5 per cell outward, one point a cell: 17 x 17 x 19 cells in the bed, 5,491 RVEs."""
+    from pathlib import Path
+
+    from grainscale.mpm.grid import Grid
+    from grainscale.mpm.points import fill_box
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "intrusion" / "seed_quick.toml"
+    case = load_case(path)
+    axes = case.grid.axes()
+    h = [np.diff(a) for a in axes]
+    assert np.isclose(h[0], 0.0625, rtol=1e-12).sum() == 12
+    fine_z = (axes[2][:-1] >= 0.5 - 1e-9) & (axes[2][1:] <= 1.75 + 1e-9)
+    np.testing.assert_allclose(h[2][fine_z], 0.0625, rtol=1e-12)
+    assert fine_z.sum() == 20
+    body = case.bodies[0]
+    x, _ = fill_box(Grid.rectilinear(axes), body.lo, body.hi, body.points_per_cell)
+    assert len(x) == 5_491
