@@ -5,7 +5,7 @@ from mpmutil import elastic_box, impulse_errors, rollers, run
 
 from grainscale.mpm import boundary
 from grainscale.mpm.grid import Grid
-from grainscale.mpm.points import fill_box
+from grainscale.mpm.points import fill_box, sub_cell_half_widths
 from grainscale.mpm.rigid import RigidBody
 from grainscale.mpm.step import step
 
@@ -96,3 +96,27 @@ def test_rigid_plate_carries_the_weight_and_balances_momentum():
     errors = impulse_errors(s, 0.4, weight)
     assert s.rigid.displacement[2] > 0.004  # the plate did push
     assert np.abs(errors).max() < 1e-9, np.abs(errors).max()
+
+
+def test_nodes_contact_finds_the_same_nodes_on_node_lists_and_on_a_graded_grid():
+    """The nodes a body covers (`contact = "nodes"`): on a uniform grid given as node
+    lists, those of the uniform grid; on a graded grid, exactly the nodes within every
+    body point's domain box |X_I - x_p| <= l_p (brute force over all nodes)."""
+    h = 0.1
+    uniform = Grid.make([0, 0, 0], h, [10, 6, 6])
+    listed = Grid.rectilinear([h * np.arange(11), h * np.arange(7), h * np.arange(7)])
+    body = _plate(uniform, [0.1, 0.2, 0.2], [0.3, 0.4, 0.4], [0.5, 0.0, -0.2], ramp=0.0)
+    body.x += 0.013  # off the lattice
+    np.testing.assert_array_equal(body.covered_nodes(listed), body.covered_nodes(uniform))
+    ax = [np.array([0.0, 0.05, 0.1, 0.15, 0.25, 0.35, 0.55]), h * np.arange(7),
+          np.array([0.0, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.6])]
+    graded = Grid.rectilinear(ax)
+    body = _plate(graded, [0.05, 0.1, 0.1], [0.35, 0.4, 0.3], [0.0, 0.0, -0.1], ramp=0.0)
+    body.lp = sub_cell_half_widths(graded, body.x, 2)  # box domains, as a case's body
+    X = graded.node_positions()
+    inside = np.zeros(len(X), dtype=bool)
+    for x, lp in zip(body.x, body.lp, strict=True):
+        inside |= np.all(np.abs(X - x) <= lp + 1e-12, axis=1)
+    got = body.covered_nodes(graded)
+    assert len(got) > 10
+    np.testing.assert_array_equal(got, np.flatnonzero(inside))

@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 
 from grainscale.mpm.grid import Grid
-from grainscale.mpm.transfer import mark_covered_nodes_kernel
+from grainscale.mpm.transfer import mark_covered_nodes_kernel, mark_covered_nodes_rectilinear
 
 BOX, CYLINDER = 0, 1
 
@@ -199,7 +199,7 @@ def cross_section(kind: int, geom: np.ndarray, axis: int, glo: np.ndarray,
 @dataclass
 class RigidBody:
     x: np.ndarray  # (R,3) m, points filling the body (frames; `nodes` contact)
-    lp: np.ndarray  # (R,) m, their GIMP half-widths
+    lp: np.ndarray  # (R,) m, their half-widths; per axis (R,3) on a rectilinear grid
     velocity: np.ndarray  # (3,) m/s, final velocity
     ramp_time: float = 0.0  # s
     start_time: float = 0.0  # s
@@ -225,10 +225,10 @@ class RigidBody:
 
     def covered_nodes(self, grid: Grid) -> np.ndarray:
         """Ids of the nodes the body covers at its current position (`nodes` contact)."""
-        if grid.axes is not None:  # the kernel locates nodes on a uniform lattice
-            raise ValueError("rigid contact = 'nodes' on a rectilinear grid: not supported; "
-                             "use contact = 'penalty'")
         mark = np.zeros(grid.n_nodes, dtype=np.bool_)
+        if grid.axes is not None:
+            mark_covered_nodes_rectilinear(self.x, self.lp, grid.axes, mark)
+            return np.flatnonzero(mark)
         mark_covered_nodes_kernel(self.x, self.lp, grid.origin, grid.cell_size, grid.cells,
                                   mark)
         return np.flatnonzero(mark)

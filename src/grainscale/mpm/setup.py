@@ -198,7 +198,9 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
             axis = np.zeros(3)
             axis[AXES[r.axis]] = 1.0
             kind, geom = CYLINDER, np.concatenate([r.center, axis, [r.radius, r.height]])
-        rigid = RigidBody(x=x, lp=np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min()),
+        lp = (sub_cell_half_widths(grid, x, r.points_per_cell) if grid.axes is not None
+              else np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min()))
+        rigid = RigidBody(x=x, lp=lp,
                           velocity=np.asarray(r.velocity, dtype=np.float64),
                           ramp_time=r.ramp_time,
                           start_time=t0 if r.start_time is None else r.start_time,

@@ -448,6 +448,32 @@ def mark_covered_nodes_kernel(x, lp, origin, h, cells, mark):
                     mark[i + nx * (j + ny * k)] = True
 
 
+@njit(cache=True)
+def _mark_boxes(lo, hi, nx, ny, mark):
+    for p in range(lo.shape[0]):
+        for k in range(lo[p, 2], hi[p, 2] + 1):
+            for j in range(lo[p, 1], hi[p, 1] + 1):
+                for i in range(lo[p, 0], hi[p, 0] + 1):
+                    mark[i + nx * (j + ny * k)] = True
+
+
+def mark_covered_nodes_rectilinear(x, lp, axes, mark) -> None:
+    """mark_covered_nodes_kernel on a rectilinear grid of node coordinates `axes`: the
+    nodes with |X_I - x_p| <= l_p on every axis, lp (R,) or per axis (R,3) (a
+    tolerance of 1e-9 of the smallest cell absorbs round-off), found by binary search
+    per axis."""
+    lo = np.empty((x.shape[0], 3), dtype=np.int64)
+    hi = np.empty((x.shape[0], 3), dtype=np.int64)
+    lp = np.asarray(lp, dtype=np.float64)
+    lp = np.broadcast_to(lp[:, None] if lp.ndim == 1 else lp, (x.shape[0], 3))
+    for a in range(3):
+        X = np.asarray(axes[a])
+        tol = 1e-9 * float(np.diff(X).min())
+        lo[:, a] = np.searchsorted(X, x[:, a] - lp[:, a] - tol, side="left")
+        hi[:, a] = np.searchsorted(X, x[:, a] + lp[:, a] + tol, side="right") - 1
+    _mark_boxes(lo, hi, len(axes[0]), len(axes[1]), mark)
+
+
 def stencil_box(base: np.ndarray, ns: int) -> np.ndarray:
     """(6,) float: minus the lowest and the highest-plus-one node index per axis touched
     by the stencils starting at base (P,3); "minus" so that one MAX reduction gives the
