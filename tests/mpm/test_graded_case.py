@@ -92,8 +92,11 @@ def test_node_lists_and_graded_axes_make_the_grid_and_its_bodies(tmp_path):
      ["grid.nodes_x is given but not grid.nodes_z"]),
     ("[grid]\ncell_size = 0.1\nnodes_x = [0.0, 0.1]\nnodes_y = [0.0, 0.1]\n"
      "nodes_z = [0.0, 0.1]\n", ["grid.cell_size with grid.nodes_x/y/z"]),
+    ("[grid]\nnodes_x = [0.0, 0.1, 0.15, 0.175]\nnodes_y = [0.0, 0.1]\nnodes_z = [0.0, 0.1]\n"
+     "periodic = ['x']\n", ["grid.nodes_x", "meet across the periodic ends", "factor 4",
+                            "at most 2"]),
     ("[grid]\nnodes_x = [0.0, 0.1]\nnodes_y = [0.0, 0.1]\nnodes_z = [0.0, 0.1]\n"
-     "periodic = ['x']\n", ["grid.periodic", "uniform grid"]),
+     "periodic = ['x']\n", ["grid.nodes_x", "at least 2 cells"]),
     ("[grid]\nnodes_x = {lo = 0.0, hi = 1.0, cell = 0.1, fine = [0.0, 0.2], ratio = 3.0}\n"
      "nodes_y = [0.0, 0.1]\nnodes_z = [0.0, 0.1]\n", ["grid.nodes_x", "ratio = 3.0",
                                                      "valid 1 to 2"]),

@@ -97,9 +97,13 @@ class GridCfg(StrictModel):
                 raise ValueError(f"grid.{uniform[0]} with grid.nodes_x/y/z: give either "
                                  "origin, cell_size and cells (a uniform grid) or the node "
                                  "coordinates of each axis, not both")
-            if self.periodic:
-                raise ValueError(f"grid.periodic = {self.periodic} with node lists: periodic "
-                                 "axes need a uniform grid (origin, cell_size, cells)")
+            if self.periodic:  # the cells that meet across a periodic axis' ends
+                from grainscale.mpm.grid import Grid
+
+                try:
+                    Grid.rectilinear(self.axes(), [a in self.periodic for a in "xyz"])
+                except ValueError as err:
+                    raise ValueError(f"grid.{err}") from None
         elif self.cell_size is None or self.cells is None:
             missing = "cell_size" if self.cell_size is None else "cells"
             raise ValueError(f"grid.{missing} is missing: a uniform grid needs cell_size and "

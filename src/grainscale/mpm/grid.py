@@ -8,11 +8,12 @@ need). The grid never moves (the "scratch pad" of seed §2.1); nodal arrays are 
 every step.
 
 Periodic axes: the material lives in [o, o + N h) along such an axis (o, N the case's
-origin and cells) and leaves through one end to re-enter at the other. The grid held here
-is that period padded by PAD cells at each end, so every stencil lies inside it and the
-kernels see an ordinary grid; `fold` sums each nodal value with its periodic images and
-hands the sum back to all of them (after P2G), `wrap` brings positions back into the
-period (after G2P).
+origin and cells; on a rectilinear grid, the span of its nodes) and leaves through one
+end to re-enter at the other. The grid held here is that period padded by PAD cells at
+each end (on a rectilinear grid, the images of the cells at the other end), so every
+stencil lies inside it and the kernels see an ordinary grid; `fold` sums each nodal
+value with its periodic images and hands the sum back to all of them (after P2G), `wrap`
+brings positions back into the period (after G2P).
 """
 
 from __future__ import annotations
@@ -48,15 +49,33 @@ class Grid:
         return cls(o - PAD * h * per, h, n + 2 * PAD * per, period)
 
     @classmethod
-    def rectilinear(cls, axes) -> Grid:
+    def rectilinear(cls, axes, periodic=(False, False, False)) -> Grid:
         """The grid of the node coordinates `axes` (x, y, z), each checked by
-        rectilinear.check_nodes (ValueError naming nodes_x, nodes_y or nodes_z)."""
-        from grainscale.mpm.rectilinear import check_nodes
+        rectilinear.check_nodes (ValueError naming nodes_x, nodes_y or nodes_z). A
+        periodic axis' period is its nodes' span; it is padded by the images of PAD
+        cells from its other end, and its first and last cells, neighbours across the
+        period's ends, must also be within MAX_RATIO of each other."""
+        from grainscale.mpm.rectilinear import MAX_RATIO, check_nodes
 
-        ax = tuple(check_nodes(a, f"nodes_{'xyz'[i]}") for i, a in enumerate(axes))
+        ax = [check_nodes(a, f"nodes_{'xyz'[i]}") for i, a in enumerate(axes)]
+        per = np.asarray(periodic, dtype=bool).reshape(3)
+        period = np.where(per, [len(a) - 1 for a in ax], 0).astype(np.int64)
+        for i in np.flatnonzero(per):
+            w = np.diff(ax[i])
+            key = f"nodes_{'xyz'[i]}"
+            if len(w) < PAD:
+                raise ValueError(f"{key}: a periodic axis needs at least {PAD} cells, got "
+                                 f"{len(w)}")
+            if max(w[0] / w[-1], w[-1] / w[0]) > MAX_RATIO * (1 + 1e-9):
+                raise ValueError(f"{key}: the first and last cells ({w[0]:.6g} m and "
+                                 f"{w[-1]:.6g} m) meet across the periodic ends and differ "
+                                 f"by a factor {max(w[0] / w[-1], w[-1] / w[0]):.4g}; valid: "
+                                 f"at most {MAX_RATIO:g}")
+            ax[i] = np.concatenate([ax[i][0] - np.cumsum(w[::-1][:PAD])[::-1], ax[i],
+                                    ax[i][-1] + np.cumsum(w[:PAD])])
+        ax = tuple(ax)
         return cls(np.array([a[0] for a in ax]), np.array([np.diff(a).min() for a in ax]),
-                   np.array([len(a) - 1 for a in ax], dtype=np.int64),
-                   np.zeros(3, dtype=np.int64), ax)
+                   np.array([len(a) - 1 for a in ax], dtype=np.int64), period, ax)
 
     @cached_property
     def node_table(self) -> np.ndarray:
@@ -84,6 +103,11 @@ class Grid:
         axes, the whole grid along the others."""
         lo, hi = self.origin.copy(), self.upper.copy()
         per = self.periodic
+        if self.axes is not None:
+            for a in np.flatnonzero(per):
+                lo[a] = self.axes[a][PAD]
+                hi[a] = self.axes[a][PAD + self.period[a]]
+            return lo, hi
         lo[per] += PAD * self.cell_size[per]
         hi[per] = lo[per] + self.period[per] * self.cell_size[per]
         return lo, hi

@@ -78,10 +78,10 @@ def _body_points(grid: Grid, body, i: int, case_dir: Path):
 
 def build_grid(case: Case) -> Grid:
     g = case.grid
-    if g.axes() is not None:
-        return Grid.rectilinear(g.axes())
-    return Grid.make(g.origin, g.cell_size, g.cells,
-                     periodic=[a in g.periodic for a in ("x", "y", "z")])
+    periodic = [a in g.periodic for a in ("x", "y", "z")]
+    if g.axes() is not None:  # checked when the case was read
+        return Grid.rectilinear(g.axes(), periodic=periodic)
+    return Grid.make(g.origin, g.cell_size, g.cells, periodic=periodic)
 
 
 def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,

@@ -91,8 +91,6 @@ class MPMState:
             local = self.points.lp.max(axis=0) if P else np.zeros(3)
             lp_max = np.asarray(self.comm.max([float(v) for v in local]))  # per axis
             self.ns = slots = stencil(self.grid.axes, lp_max, self.shape == GIMP)
-            if self.grid.periodic.any():
-                raise ValueError("periodic axes on a rectilinear grid: not supported")
         self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads, self.comm, self.n_global,
                                  fold=self.grid.fold if self.grid.periodic.any() else None)
         self.dH = np.zeros((P, 3, 3))
