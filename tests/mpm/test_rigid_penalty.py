@@ -113,20 +113,26 @@ def test_penalty_plate_on_elastic_block_gives_the_series_stiffness():
     assert np.all(np.abs(s.rigid.force[:2]) < 1e-9 * abs(s.rigid.force[2]))
 
 
-def test_penalty_plate_on_a_graded_grid_gives_the_series_stiffness():
+@pytest.mark.parametrize("z_nodes, H", [
+    ([0.0, 0.1, 0.15, 0.2, 0.25, 0.3], 0.2),
+    ([0.0, 1.6, 2.4, 2.8, 3.0, 3.1, 3.15, 3.175, 3.1875, 3.2, 3.225, 3.275], 3.2)])
+def test_penalty_plate_on_a_graded_grid_gives_the_series_stiffness(z_nodes, H):
     """The same plate and block on a rectilinear grid: x and y cells of 0.05, 0.05 and
-    0.1 m, z cells of 0.1, 0.05 and 0.05 m up to the top, so the points under the plate
-    have box domains (half-widths 0.0125-0.025 m across, 0.0125 m along z) and two
-    masses. The contact springs take the half-extent along the normal, l_z, so
+    0.1 m, z cells growing downward from the top, so the points under the plate have box
+    domains (half-widths 0.0125-0.025 m across, l_z along z) and three masses. The
+    contact springs take the half-extent along the normal, l_z, so
     k_p = kappa m_p (c / 2 l_z)^2 per point and F = d / ((H - l_z)/(M A) + 1/sum k_p),
-    within 1 % as on the uniform grid."""
+    within 1 % as on the uniform grid. In the second grid the heaviest point is 512
+    times the lightest under the plate: the contact zone's light-node rule (no force on
+    nodes under 1 % of a point) must measure "a point" locally (MPMState.m_point_ref),
+    or every node under the plate counts as light and the plate meets no resistance."""
     from grainscale.mpm.materials import LinearElastic
     from grainscale.mpm.points import make_points, sub_cell_half_widths
     from grainscale.mpm.step import MPMState
 
-    H, a, E, nu, rho = 0.2, 0.2, 1e6, 0.3, 1000.0
+    a, E, nu, rho = 0.2, 1e6, 0.3, 1000.0
     xy = [0.0, 0.05, 0.1, 0.2]
-    grid = Grid.rectilinear([xy, xy, [0.0, 0.1, 0.15, 0.2, 0.25, 0.3]])
+    grid = Grid.rectilinear([xy, xy, z_nodes])
     x, vol = fill_box(grid, [0, 0, 0], [a, a, H], 2)
     pts = make_points(x, vol, rho, 0, lp=sub_cell_half_widths(grid, x, 2))
     mat = LinearElastic("m", pts.n, density=rho, youngs_modulus=E, poisson_ratio=nu)
@@ -141,7 +147,7 @@ def test_penalty_plate_on_a_graded_grid_gives_the_series_stiffness():
     d = -s.rigid.displacement[2]
     M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
     c = np.sqrt(M / rho)
-    lz = 0.0125
+    lz = 0.25 * (H - z_nodes[z_nodes.index(H) - 1])
     np.testing.assert_allclose(pts.lp[top, 2], lz)
     k_p = pts.m[top] * (c / (2 * lz)) ** 2
     assert s.rigid.in_contact == top.sum()

@@ -86,6 +86,22 @@ class Grid:
             table[a, :self.nodes[a]] = self.axes[a]
         return table
 
+    @cached_property
+    def node_volume_ratio(self):
+        """The volume of the largest cell beside each node (the product over axes of the
+        larger of its two neighbouring cells; a grid end's node has one) over the largest
+        cell's: (n_nodes,) on a rectilinear grid, where a mass threshold stated as a
+        fraction of a point must follow the size of the points beside the node (points in
+        a cell 8 times larger are 8 times heavier); 1.0 on a uniform grid."""
+        if self.axes is None:
+            return 1.0
+        dual = []
+        for a in self.axes:
+            h = np.diff(a)
+            dual.append(np.maximum(np.concatenate([h[:1], h]), np.concatenate([h, h[-1:]])))
+        v = (dual[2][:, None, None] * dual[1][None, :, None] * dual[0][None, None, :]).ravel()
+        return v / v.max()
+
     @property
     def cell_max(self) -> np.ndarray:
         """(3,) m, each axis' largest cell."""

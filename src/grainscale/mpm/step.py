@@ -102,8 +102,11 @@ class MPMState:
         self.vmax, mmax = self.comm.max([vmax, mmax])
         self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
         self.chunk_out = np.zeros_like(self.transfer.chunk_count)
-        self.mass_tol = MASS_TOL * mmax
         self.m_point_max = mmax
+        # the mass of "a point" beside each node: the heaviest point's, scaled by the
+        # node's share of space on a graded grid (a fine cell's points are lighter)
+        self.m_point_ref = mmax * self.grid.node_volume_ratio
+        self.mass_tol = MASS_TOL * self.m_point_ref
         self.contact_loads = None
         lp_min = float(self.points.lp.min()) if P else np.inf
         self.lp_min = -float(self.comm.max([-lp_min])[0])  # smallest half-width, all ranks
@@ -268,7 +271,7 @@ def integrate_grid(s: MPMState, dt: float) -> None:
         # surface crossing a node plane), and the acceleration would blow up
         light = np.zeros(len(s.mass), dtype=np.bool_)
         light[s.contact_loads[0]] = True
-        light &= s.mass < CONTACT_MASS_TOL * s.m_point_max
+        light &= s.mass < CONTACT_MASS_TOL * s.m_point_ref
         f[light] = 0.0
     if nodes_contact(s):
         # the force the body exerts on the nodes it covers is (m_I v_body - p_I)/dt - f_I,
@@ -307,7 +310,7 @@ def affine_velocity(s: MPMState) -> np.ndarray:
     vanishes), so momentum is conserved as before, and C_p's own momentum in P2G is
     zero for shape functions that reproduce linear fields.
     """
-    light = (s.mass < LIGHT_MASS_TOL * s.m_point_max) & s.active
+    light = (s.mass < LIGHT_MASS_TOL * s.m_point_ref) & s.active
     if s.velocity_update == "flip" or not light.any():
         return s.v_new
     p_free = s.mass[:, None] * s.v_old
