@@ -217,7 +217,9 @@ def evaluate(x: np.ndarray, lp: np.ndarray, axes, gimp: bool = True, out=None):
     `out` may pass (base, w, dw) to fill, ns = w.shape[2] (at least `stencil`)."""
     P = x.shape[0]
     if np.ndim(lp) < 2:  # one half-width per point: the same on every axis
-        lp = np.broadcast_to(np.reshape(lp, (-1, 1)) if np.ndim(lp) else lp, (P, 3))
+        from grainscale.mpm.points import half_widths
+
+        lp = half_widths(lp, P)
     l = np.ascontiguousarray(lp if gimp else np.zeros((P, 3)), dtype=np.float64)
     if out is None:
         ns = stencil(axes, l.max(axis=0) if P else 0.0)

@@ -24,6 +24,7 @@ from numba import njit
 
 from grainscale.linalg3 import det3
 from grainscale.mpm.parallel import CHUNK, parallel_for
+from grainscale.mpm.points import half_widths
 
 HEADROOM = 62  # bits available to a nodal sum (int64 has 63 plus sign)
 
@@ -464,8 +465,7 @@ def mark_covered_nodes_rectilinear(x, lp, axes, mark) -> None:
     per axis."""
     lo = np.empty((x.shape[0], 3), dtype=np.int64)
     hi = np.empty((x.shape[0], 3), dtype=np.int64)
-    lp = np.asarray(lp, dtype=np.float64)
-    lp = np.broadcast_to(lp[:, None] if lp.ndim == 1 else lp, (x.shape[0], 3))
+    lp = half_widths(lp, x.shape[0])
     for a in range(3):
         X = np.asarray(axes[a])
         tol = 1e-9 * float(np.diff(X).min())
