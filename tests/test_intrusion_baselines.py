@@ -45,6 +45,19 @@ def test_reshape_defaults_leave_the_case_as_it_was():
     assert reshape.reshape(case).model_dump(mode="json", exclude_unset=True) == before
 
 
+def test_reshape_keeps_a_graded_grid_and_refuses_to_rescale_it():
+    """seed_quick.toml's twin runs on its own graded grid (no option: unchanged; points a
+    cell may still change); asking for a cell size or a bed names the option."""
+    case = baselines.baseline_case(HERE / "seed_quick.toml", "mohr_coulomb", 20.0)
+    before = case.model_dump(mode="json", exclude_unset=True)
+    assert reshape.reshape(case).model_dump(mode="json", exclude_unset=True) == before
+    assert reshape.reshape(case, points_per_cell=2).bodies[0].points_per_cell == 2
+    with pytest.raises(SystemExit, match="--cell-size: .* graded grid"):
+        reshape.reshape(case, 0.125)
+    with pytest.raises(SystemExit, match="--quarter: .* graded grid"):
+        reshape.reshape(case, width=5.0, depth=4.0)
+
+
 def test_reshape_cli_writes_the_multiscale_case_in_a_deeper_bed(tmp_path):
     """The written case keeps the probes at their depth below the surface (same x, y),
     passes the loader's checks, and an existing file is not overwritten."""

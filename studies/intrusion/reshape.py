@@ -29,8 +29,17 @@ def reshape(case: gs.Case, cell: float | None = None, points_per_cell: int | Non
     """The intrusion case on cells of `cell` m with `points_per_cell`^3 points a cell, a
     width x width quarter of a bed `depth` deep [m] (each default: the case's own), the
     intruder's base and the probes kept at their depth below the bed's surface. Changes
-    `case` in place (each edit validated) and returns it."""
+    `case` in place (each edit validated) and returns it. A graded grid (node lists) is
+    kept as it is; its cells or bed are not rescaled (SystemExit naming the option)."""
     body, rigid = case.bodies[0], case.rigid
+    if points_per_cell is not None:
+        body.points_per_cell = points_per_cell
+    if cell is None and width is None and depth is None:
+        return case
+    if case.grid.cell_size is None:
+        asked = "--cell-size" if cell is not None else "--quarter"
+        raise SystemExit(f"{asked}: {case.title!r} has a graded grid (nodes_x/y/z), which "
+                         "is not rescaled; valid only for a case with cell_size and cells")
     cell = case.grid.cell_size if cell is None else cell
     width = body.hi[0] if width is None else width
     lift = 0.0 if depth is None else depth - body.hi[2]
@@ -38,8 +47,6 @@ def reshape(case: gs.Case, cell: float | None = None, points_per_cell: int | Non
     case.grid.cell_size = cell
     case.grid.cells = [round(width / cell), round(width / cell), round((depth + ABOVE) / cell)]
     body.hi = [width, width, depth]
-    if points_per_cell is not None:
-        body.points_per_cell = points_per_cell
     for key in ("center", "lo", "hi"):
         if getattr(rigid, key, None) is not None:
             x, y, z = getattr(rigid, key)
