@@ -61,9 +61,20 @@ def test_two_packings_agree_with_the_recipes_sixteen(tmp_path):
     assert r["peak_phi_deg"] >= r["phi_deg"]
     assert set(r["phi_per_axis_deg"]) == {"x", "y", "z"} and len(r["phi_per_packing_deg"]) == 2
     assert r["packings"] == ["packing_0.h5", "packing_1.h5"]
+    # 0.1 /s over DEM steps of 0.3 sqrt(m_min / (E r_max)): 6.2e-6 s for the recipe's
+    # 3 and 7 mm bounds, up to 10 % longer where a packing's smallest grain is larger
+    assert r["strain_rate"] == 0.1
+    assert 6.2e-7 <= r["strain_per_dem_step"] <= 6.9e-7, r
     stamp = [p.stat().st_mtime_ns for p in sorted((tmp_path / "phi_packings").glob("*.h5"))]
     assert fa.main([str(QUICK), "--realisations", "2", "--axes", "z",
                     "--out", str(out)]) == 0
     assert [p.stat().st_mtime_ns for p in sorted((tmp_path / "phi_packings").glob("*.h5"))] \
         == stamp
     assert json.loads(out.read_text())["phi_per_axis_deg"]["z"] == r["phi_per_axis_deg"]["z"]
+
+
+def test_bad_strain_rate_is_refused_before_any_packing(tmp_path):
+    with pytest.raises(SystemExit):
+        fa.main([str(QUICK), "--realisations", "2", "--strain-rate", "0",
+                 "--out", str(tmp_path / "phi.json")])
+    assert not (tmp_path / "phi_packings").exists()

@@ -2,6 +2,7 @@
 
     python studies/intrusion/friction_angle.py CASE.toml RUN --out phi.json
     python studies/intrusion/friction_angle.py CASE.toml --realisations 16 --out phi.json
+        [--strain-rate RATE]
 
 Drained triaxial compression of RVE packings (the case's [triaxial] table: confining
 pressure, rate, axial strain), one batch per loading axis (`--axes`, default x y z: the
@@ -10,6 +11,9 @@ phi = asin((sigma_1 - sigma_3)/(sigma_1 + sigma_3)), sigma_1 the axial and sigma
 mean lateral stress, is averaged over axial strains from `--from` to the end: the steady
 (critical-state) part of the test, the analogue of a repose angle, which is the angle
 Kang et al.'s law is written for. The peak of each path is reported beside it.
+`--strain-rate` replaces the table's rate [1/s]; the result gives the strain per DEM step
+it makes (rate x the DEM step), comparable with a quasi-static coupled run's
+`strain_per_substep` (docs/coupling.md), which loads its RVEs at that strain per step.
 
 Which packings:
 - RUN: the ones the run used (RUN/packings/*.h5). A geostatic library's packings
@@ -39,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from grainscale import rve
+from grainscale.dem import element_tests
 
 AXES = {"x": 0, "y": 1, "z": 2}
 # two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
@@ -96,6 +101,7 @@ def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
     together as one batch per axis, with the [triaxial] table `test` (its confining
     pressure) and the case's [rve] contact law."""
     batch = rve.packing(case, paths)
+    strain_per_step = test.strain_rate * element_tests.timestep(batch, case.rve)
     steady = np.empty((len(paths), len(axes)))
     peak = np.empty_like(steady)
     for j, axis in enumerate(axes):
@@ -110,7 +116,7 @@ def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
                                  f"raise [triaxial] axial_strain or lower --from")
             steady[i, j] = phi[window].mean()
             peak[i, j] = phi.max()
-    return steady, peak
+    return steady, peak, strain_per_step
 
 
 def summary(samples: np.ndarray) -> tuple[float, float]:
@@ -131,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--from", dest="start", type=float, default=0.1,
                     help="axial strain where the steady window starts")
+    ap.add_argument("--strain-rate", type=float, metavar="RATE",
+                    help="1/s, instead of the [triaxial] table's")
     args = ap.parse_args(argv)
     if (args.run is None) == (args.realisations is None):
         ap.error("give either RUN or --realisations N")
@@ -139,6 +147,10 @@ def main(argv: list[str] | None = None) -> int:
     case = rve.load(args.case)
     if case.triaxial is None:
         raise SystemExit(f"{args.case}: no [triaxial] table (confining pressure, rate, strain)")
+    if args.strain_rate is not None:
+        if not 0.0 < args.strain_rate <= 100.0:
+            ap.error(f"--strain-rate {args.strain_rate}: valid 0 < rate <= 100 1/s")
+        case.triaxial.strain_rate = args.strain_rate
     if args.realisations is not None:
         folder = args.out.with_name(f"{args.out.stem}_packings")
         tested = [(p, None) for p in realisations(case, args.realisations, folder)]
@@ -155,8 +167,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"triaxial at {pressure:g} Pa: {len(idx)} packing(s) x axes {args.axes}",
               file=sys.stderr, flush=True)
         test = case.triaxial.model_copy(update={"confining_pressure": pressure})
-        steady[idx], peak[idx] = steady_angles([tested[i][0] for i in idx], case, test,
-                                               args.axes, args.start)
+        steady[idx], peak[idx], strain_per_step = steady_angles(
+            [tested[i][0] for i in idx], case, test, args.axes, args.start)
     phi, band = summary(steady.mean(axis=1))
     peak_mean, peak_band = summary(peak.mean(axis=1))
     result = {
@@ -168,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
         "peak_phi_per_packing_deg": [round(float(m), 2) for m in peak.mean(axis=1)],
         "method": f"drained triaxial along {' '.join(args.axes)}, mean mobilised angle for "
                   f"axial strain >= {args.start}; {what}",
+        "strain_rate": case.triaxial.strain_rate,
+        "strain_per_dem_step": float(f"{strain_per_step:.3g}"),
         "case": str(args.case), "packings": [p.name for p, _ in tested]}
     if len(by_pressure) > 1:
         result["phi_per_level_deg"] = {
