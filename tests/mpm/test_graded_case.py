@@ -138,6 +138,11 @@ def test_a_graded_case_runs_and_keeps_its_points_inside(tmp_path):
     for a, arr in enumerate(arrays):
         np.testing.assert_array_equal(np.array(arr.text.split(), float), axes[a])
     assert root.find("RectilinearGrid").get("WholeExtent") == "0 4 0 2 0 9"
+    # the run's case.resolved.toml reads back as the same grid (no uniform origin in it)
+    import grainscale as gs
+
+    for a, nodes in enumerate(gs.open_result(out).case.grid.axes()):
+        np.testing.assert_array_equal(nodes, axes[a])
 
 
 @pytest.mark.parametrize("name", ["seed", "seed_cuboid"])

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import tomli_w
-from pydantic import Field, PrivateAttr, field_validator, model_validator
+from pydantic import Field, PrivateAttr, field_validator, model_serializer, model_validator
 
 from grainscale.config.base import ConfigError, StrictModel, load_toml, read_toml, validate
 from grainscale.config.rve import (
@@ -109,6 +109,15 @@ class GridCfg(StrictModel):
             raise ValueError(f"grid.{missing} is missing: a uniform grid needs cell_size and "
                              "cells (or give nodes_x, nodes_y and nodes_z)")
         return self
+
+    @model_serializer(mode="wrap")
+    def _no_origin_with_nodes(self, handler):
+        # a rectilinear grid's origin is its first nodes: writing the default back would
+        # make case.resolved.toml a case that _one_form refuses
+        data = handler(self)
+        if self.nodes_x is not None:
+            data.pop("origin", None)
+        return data
 
     def axes(self):
         """The node coordinates of each axis (3 arrays, m), or None for a uniform grid."""
