@@ -178,3 +178,26 @@ def test_cut_last_row_is_dropped(tmp_path, capsys):
     code, out, err = run_main(capsys, [run, "--phi", 26.8])
     assert code == 0, err
     assert json.loads(out.strip().splitlines()[-1])["depth_over_R_max"] == pytest.approx(1.05)
+
+
+stagnant = load_example("intrusion/stagnant.py")
+HERE = Path(__file__).resolve().parents[1] / "examples" / "intrusion"
+
+
+def test_stagnant_tiles_take_each_points_cell_on_uniform_and_graded_grids():
+    """stagnant.py's tiles: quick.toml's 0.125 m cells with one point a cell everywhere;
+    seed_quick.toml's 0.0625 m cells near the intruder and ~1.5 times larger just beyond
+    x = 0.75 m (the growth scaled to end at the wall); the cylinder's section
+    by y = 0 spans [-R, R] and its base follows the depth."""
+    import grainscale as gs
+
+    quick = gs.load_case(HERE / "quick.toml")
+    x = np.array([[0.1, 0.1, 1.2], [1.9, 1.9, 0.1]])
+    np.testing.assert_array_equal(stagnant.point_spacing(quick, x), np.full((2, 3), 0.125))
+    graded = gs.load_case(HERE / "seed_quick.toml")
+    h = stagnant.point_spacing(graded, np.array([[0.7, 0.03, 1.2], [0.8, 0.03, 1.2]]))
+    first_coarse = np.diff(graded.grid.axes()[0])[12]  # beyond the 12 fine cells
+    assert first_coarse == pytest.approx(0.0625 * 1.5, rel=0.02)  # scaled to end at 2 m
+    np.testing.assert_allclose(h[:, 0], [0.0625, first_coarse], rtol=1e-12)
+    np.testing.assert_allclose(h[:, 2], 0.0625, rtol=1e-9)
+    assert stagnant.intruder_section(graded, 0.25) == pytest.approx((-0.5, 1.25, 1.0, 1.0))

@@ -5,10 +5,12 @@
 
 Reads the run's VTK frames (frames.pvd) and, for the frames nearest the requested d/R,
 draws the points of the first layer next to the symmetry plane y = 0 (y below one point
-spacing) coloured by `rotation_rate`, the mean angular speed of the RVE's grains
-(rad/s, seed Eq. 15): a stagnant cone moves with the intruder and its grains barely
-roll, while the shear zone around it rolls fast. Depth and d/R come from history.csv.
-Prints the frames used; the last line is one JSON object.
+spacing of the first cell along y) as tiles of their point spacing in x and z (on a
+graded grid, their cell's), coloured by `rotation_rate`, the mean angular speed of the
+RVE's grains (rad/s, seed Eq. 15), with the intruder's section outlined: a stagnant cone
+moves with the intruder and its grains barely roll, while the shear zone around it rolls
+fast. Depth and d/R come from history.csv. Prints the frames used; the last line is one
+JSON object.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import tomllib
 from pathlib import Path
 
 import matplotlib
@@ -24,6 +25,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.collections import PatchCollection  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 
 import grainscale as gs  # noqa: E402
 from grainscale.analysis import read_frame  # noqa: E402
@@ -35,6 +38,32 @@ def frames(out: Path) -> list[tuple[float, Path]]:
     return [(float(t), out / f) for t, f in found]
 
 
+def point_spacing(case: gs.Case, x: np.ndarray) -> np.ndarray:
+    """(N, 3) spacing [m] of the points at positions x: the size of the grid cell each
+    lies in over the body's points a cell (a uniform grid: cell_size / points_per_cell)."""
+    n = case.bodies[0].points_per_cell
+    axes = case.grid.axes()
+    if axes is None:
+        h = case.grid.cell_size
+        h = np.asarray(h if isinstance(h, tuple) else (h, h, h), float)
+        return np.broadcast_to(h / n, x.shape).copy()
+    out = np.empty_like(x)
+    for a, nodes in enumerate(axes):
+        k = np.clip(np.searchsorted(nodes, x[:, a], side="right") - 1, 0, len(nodes) - 2)
+        out[:, a] = np.diff(nodes)[k] / n
+    return out
+
+
+def intruder_section(case: gs.Case, depth: float) -> tuple[float, float, float, float]:
+    """(x0, z0, width, height) [m] of the intruder's section by y = 0, `depth` below
+    its initial place (a cylinder about z or a box)."""
+    rigid = case.rigid
+    if rigid.shape == "cylinder":
+        cx, _, cz = rigid.center
+        return cx - rigid.radius, cz - depth, 2.0 * rigid.radius, rigid.height
+    return rigid.lo[0], rigid.lo[2] - depth, rigid.hi[0] - rigid.lo[0], rigid.hi[2] - rigid.lo[2]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
@@ -42,41 +71,52 @@ def main() -> None:
     ap.add_argument("--png", type=Path, default=None)
     args = ap.parse_args()
     try:
-        hist = gs.open_result(args.out).history
-    except ValueError as err:
+        result = gs.open_result(args.out)
+        hist, case = result.history, result.case
+    except (ValueError, gs.ConfigError) as err:
         raise SystemExit(str(err)) from None
-    for col in ("time", "depth_over_R"):
+    for col in ("time", "depth", "depth_over_R"):
         if col not in hist:
             raise SystemExit(f"{args.out / 'history.csv'}: no column {col!r}")
-    case = tomllib.loads((args.out / "case.resolved.toml").read_text())
-    spacing = case["grid"]["cell_size"] / case["bodies"][0]["points_per_cell"]
+    if case.rigid is None:
+        raise SystemExit(f"{args.out}: the case has no [rigid] intruder")
     series = frames(args.out)
     times = np.array([t for t, _ in series])
     d_of_t = np.interp(times, hist["time"], hist["depth_over_R"])
     chosen = []
     for target in args.depths:
         k = int(np.argmin(np.abs(d_of_t - target)))
-        chosen.append((target, float(d_of_t[k]), float(times[k]), series[k][1]))
+        chosen.append((target, float(d_of_t[k]), float(times[k]), series[k][1],
+                       float(np.interp(times[k], hist["time"], hist["depth"]))))
     fig, axes = plt.subplots(1, len(chosen), figsize=(4.6 * len(chosen) + 1, 4.2),
                              squeeze=False, constrained_layout=True)
     vmax = 0.0
     data = []
-    for *_, f in chosen:
+    first_y = point_spacing(case, np.zeros((1, 3)))[0, 1]  # the layer next to y = 0
+    for *_, f, _ in chosen:
         x, fields = read_frame(f)
         rate = np.asarray(fields["rotation_rate"]).ravel()
-        near = x[:, 1] < spacing
-        data.append((x[near], rate[near]))
+        near = x[:, 1] < first_y
+        data.append((x[near], point_spacing(case, x[near]), rate[near]))
         vmax = max(vmax, float(np.nanpercentile(rate[near], 98)))
-    for ax, (target, d, t, f), (x, rate) in zip(axes[0], chosen, data, strict=True):
-        sc = ax.scatter(x[:, 0], x[:, 2], c=rate, s=12, cmap="viridis", vmin=0.0, vmax=vmax)
+    lo, hi, _ = case.grid.extent()
+    for ax, (target, d, t, f, depth), (x, h, rate) in zip(axes[0], chosen, data, strict=True):
+        tiles = PatchCollection([Rectangle((px - hx / 2, pz - hz / 2), hx, hz) for px, pz, hx, hz
+                                 in zip(x[:, 0], x[:, 2], h[:, 0], h[:, 2], strict=True)],
+                                cmap="viridis", linewidth=0, antialiased=False)
+        tiles.set_array(rate)
+        tiles.set_clim(0.0, vmax)
+        ax.add_collection(tiles)
+        x0, z0, w, ht = intruder_section(case, depth)
+        ax.add_patch(Rectangle((x0, z0), w, ht, fill=False, edgecolor="w", lw=1.2))
         ax.set(title=f"d/R = {d:.2f} (t = {t:.2f} s)", xlabel="x (m)", ylabel="z (m)",
-               aspect="equal")
+               aspect="equal", xlim=(lo[0], hi[0]), ylim=(lo[2], hi[2]), facecolor="0.85")
         print(f"d/R {target}: frame {f.name}, d/R {d:.3f}, t {t:.3f} s", flush=True)
-    fig.colorbar(sc, ax=axes[0].tolist(), label="grain rotation rate (rad/s)")
+    fig.colorbar(tiles, ax=axes[0].tolist(), label="grain rotation rate (rad/s)")
     png = args.png or args.out / "stagnant.png"
     fig.savefig(png, dpi=120)
     print(json.dumps({"png": str(png), "frames": [
-        {"depth_over_R": round(d, 4), "time": t, "file": f.name} for _, d, t, f in chosen]}))
+        {"depth_over_R": round(d, 4), "time": t, "file": f.name} for _, d, t, f, _ in chosen]}))
 
 
 if __name__ == "__main__":
