@@ -438,3 +438,21 @@ particles = 150
     monkeypatch.setattr(materials, "generate", refuse)
     from grainscale.cli import main
     assert main(["run", str(case), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+
+
+def test_rve_steps_field_counts_the_quasi_static_substeps(small_rve):
+    """The `rve_steps` frame field grows per update by the quasi-static rule's
+    n = ceil(max|dH| / strain_per_substep) at each point: points at rates 1, 0 and 0.5
+    of a 1e-3 log stretch (dH_xx = expm1(1e-3) = 1.0005e-3, just over 50 substeps of
+    2e-5) take 51, min_substeps = 1 and 26 steps an update."""
+    params, packing = small_rve
+    mat = RVEMaterial("sand", params, [packing], n_points=3, mode="quasi_static",
+                      strain_per_substep=2e-5)
+    stress = mat.initial_stress()
+    before = mat.point_fields()["rve_steps"]
+    dH = _extension([1.0, 0.0, 0.5], d=1e-3)
+    expected = np.maximum(1, np.ceil(np.abs(dH).max(axis=(1, 2)) / 2e-5))
+    for _ in range(3):
+        mat.update(dH, 1e-3, stress)
+    np.testing.assert_array_equal(mat.point_fields()["rve_steps"] - before, 3 * expected)
+    assert list(expected) == [51.0, 1.0, 26.0]

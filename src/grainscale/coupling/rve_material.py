@@ -383,9 +383,15 @@ class RVEMaterial:
     def point_fields(self) -> dict[str, np.ndarray]:
         """Per-point RVE quantities for VTK frames and history: porosity, coordination,
         mean accumulated rotation [rad] and its rate [rad/s] (seed Eq. 15, Fig. 15), the
-        RVE's own eps_v and its sphere count (which grows when its cell is retiled)."""
+        RVE's own eps_v, its sphere count (which grows when its cell is retiled) and the
+        DEM steps it has taken since its packing was generated (where the DEM work goes:
+        their difference between two frames)."""
         if not self.groups:
             return {}
+        for batch in self.groups if self.device == "cuda" else ():  # a kernel counter
+            dev = self._dev.get(id(batch))
+            if dev is not None and dev.host is batch:
+                dev.arrays["step_count"].copy_to_host(batch.step_count)
         return {
             "porosity": self._per_point(lambda b: b.porosity()),
             "coordination": self._per_point(homogenise.coordination),
@@ -393,6 +399,7 @@ class RVEMaterial:
             "rotation_rate": self.spin_rate,
             "rve_eps_v": self._per_point(homogenise.volumetric_strain),
             "rve_particles": self.particle_counts().astype(float),
+            "rve_steps": self._per_point(lambda b: b.step_count).astype(float),
         }
 
     @staticmethod
