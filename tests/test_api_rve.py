@@ -191,3 +191,21 @@ def test_progress_in_a_log_is_a_few_plain_lines(params, capfd):
     assert "\r" not in err
     gs.rve.triaxial(case, start, progress=False)
     assert capfd.readouterr().err == ""
+
+
+def test_timestep_is_the_stiffest_contact_of_the_lightest_grain(params):
+    """rve.timestep of the 150-sphere test packing: safety sqrt(m_min / (E r_max)), the
+    lightest grain's mass from the smallest radius in the packing file and the [rve]
+    density, computed here independently of the batch's masses."""
+    from math import pi, sqrt
+
+    from grainscale import rve
+
+    case = rve.load(params)
+    batch = rve.packing(case, PACKING)
+    radius = read_packing(PACKING)[2]
+    m_min = case.rve.density * 4.0 / 3.0 * pi * radius.min() ** 3
+    expected = case.rve.numerics.timestep_safety * sqrt(
+        m_min / (case.rve.young_modulus * radius.max()))
+    assert rve.timestep(case, batch) == pytest.approx(expected, rel=1e-12)
+    assert rve.timestep(params, batch) == rve.timestep(case, batch)

@@ -160,6 +160,27 @@ def packing(params: RVECase | Case | str | Path,
     return batch
 
 
+def timestep(params: RVECase | Case | str | Path, batch: RVEBatch) -> float:
+    """The DEM step [s] of the tests here and of a quasi-static coupled run's RVEs:
+    dt = safety sqrt(m_min / (E r_max)) over the batch's spheres ([rve.numerics]
+    timestep_safety, E the grains' Young's modulus). A test's strain per DEM step is its
+    rate times dt, comparable with a coupled run's `strain_per_substep`.
+
+    Parameters
+    ----------
+    params : RVECase or Case or dict or str or pathlib.Path
+        The RVE tables, as for `packing`.
+    batch : RVEBatch
+        The packing(s) (`generate`, `packing`).
+
+    Returns
+    -------
+    float
+        The step [s].
+    """
+    return element_tests.timestep(batch, _case(params).rve)
+
+
 def save(params: RVECase | Case | str | Path, batch: RVEBatch, path: str | Path) -> Path:
     """Write RVE 0 of `batch` as `grainscale rve generate --out` does.
 
@@ -648,4 +669,4 @@ def _test(name: str, run, case: RVECase, test, start: RVEBatch | None, on_row,
 
 
 __all__ = ["Curve", "flow", "generate", "isotropic", "load", "packing", "rows_of", "save",
-           "shear", "triaxial", "triaxial_ensemble", "undrained"]
+           "shear", "timestep", "triaxial", "triaxial_ensemble", "undrained"]

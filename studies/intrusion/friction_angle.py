@@ -43,7 +43,6 @@ from pathlib import Path
 import numpy as np
 
 from grainscale import rve
-from grainscale.dem import element_tests
 
 AXES = {"x": 0, "y": 1, "z": 2}
 # two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
@@ -101,7 +100,7 @@ def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
     together as one batch per axis, with the [triaxial] table `test` (its confining
     pressure) and the case's [rve] contact law."""
     batch = rve.packing(case, paths)
-    strain_per_step = test.strain_rate * element_tests.timestep(batch, case.rve)
+    strain_per_step = test.strain_rate * rve.timestep(case, batch)
     steady = np.empty((len(paths), len(axes)))
     peak = np.empty_like(steady)
     for j, axis in enumerate(axes):
