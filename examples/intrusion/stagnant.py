@@ -1,7 +1,8 @@
 """The stagnant zone under an intruder: the RVEs' rotation rate on the symmetry plane
 (seed Fig. 15).
 
-    python examples/intrusion/stagnant.py OUT [--depths 0.5 1.0] [--png OUT/stagnant.png]
+    python examples/intrusion/stagnant.py OUT [--depths 0.5 1.0] [--box X0 X1 Z0 Z1]
+        [--png OUT/stagnant.png]
 
 Reads the run's VTK frames (frames.pvd) and, for the frames nearest the requested d/R,
 draws the points of the first layer next to the symmetry plane y = 0 (y below one point
@@ -9,7 +10,8 @@ spacing of the first cell along y) as tiles of their point spacing in x and z (o
 graded grid, their cell's), coloured by `rotation_rate`, the mean angular speed of the
 RVE's grains (rad/s, seed Eq. 15), with the intruder's section outlined: a stagnant cone
 moves with the intruder and its grains barely roll, while the shear zone around it rolls
-fast. Depth and d/R come from history.csv. Prints the frames used; the last line is one
+fast. `--box` draws only that part of the plane [m] (default: the grid). Depth and d/R
+come from history.csv. Prints the frames used; the last line is one
 JSON object.
 """
 
@@ -68,8 +70,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--depths", type=float, nargs="+", default=[0.5, 1.0], help="d/R")
+    ap.add_argument("--box", type=float, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
+                    help="the part of the plane drawn, m (default: the grid)")
     ap.add_argument("--png", type=Path, default=None)
     args = ap.parse_args()
+    if args.box and not (args.box[0] < args.box[1] and args.box[2] < args.box[3]):
+        raise SystemExit(f"--box {args.box}: valid X0 < X1 and Z0 < Z1 (m)")
     try:
         result = gs.open_result(args.out)
         hist, case = result.history, result.case
@@ -100,6 +106,7 @@ def main() -> None:
         data.append((x[near], point_spacing(case, x[near]), rate[near]))
         vmax = max(vmax, float(np.nanpercentile(rate[near], 98)))
     lo, hi, _ = case.grid.extent()
+    x0, x1, z0, z1 = args.box if args.box else (lo[0], hi[0], lo[2], hi[2])
     for ax, (target, d, t, f, depth), (x, h, rate) in zip(axes[0], chosen, data, strict=True):
         tiles = PatchCollection([Rectangle((px - hx / 2, pz - hz / 2), hx, hz) for px, pz, hx, hz
                                  in zip(x[:, 0], x[:, 2], h[:, 0], h[:, 2], strict=True)],
@@ -107,10 +114,10 @@ def main() -> None:
         tiles.set_array(rate)
         tiles.set_clim(0.0, vmax)
         ax.add_collection(tiles)
-        x0, z0, w, ht = intruder_section(case, depth)
-        ax.add_patch(Rectangle((x0, z0), w, ht, fill=False, edgecolor="w", lw=1.2))
+        bx, bz, w, ht = intruder_section(case, depth)
+        ax.add_patch(Rectangle((bx, bz), w, ht, fill=False, edgecolor="w", lw=1.2))
         ax.set(title=f"d/R = {d:.2f} (t = {t:.2f} s)", xlabel="x (m)", ylabel="z (m)",
-               aspect="equal", xlim=(lo[0], hi[0]), ylim=(lo[2], hi[2]), facecolor="0.85")
+               aspect="equal", xlim=(x0, x1), ylim=(z0, z1), facecolor="0.85")
         print(f"d/R {target}: frame {f.name}, d/R {d:.3f}, t {t:.3f} s", flush=True)
     fig.colorbar(tiles, ax=axes[0].tolist(), label="grain rotation rate (rad/s)")
     png = args.png or args.out / "stagnant.png"
