@@ -95,3 +95,18 @@ def test_to_depth_sets_the_end_time_from_ramp_and_velocity(tmp_path):
     bad = subprocess.run(cmd[:-1] + [str(tmp_path / "x.toml"), "--to-depth", "3.5"],
                          capture_output=True, text=True)
     assert bad.returncode != 0 and "--to-depth 3.5: valid 0 < d/R < 3" in bad.stderr
+
+
+def test_surface_replaces_the_intruders_contact():
+    """--contact nodes: no-slip, with the penalty-only keys back at their defaults (the
+    loader refuses them with nodes); --contact penalty --friction 0.5: a rough penalty
+    surface. Both pass the loader's checks and say so in the title."""
+    case = baselines.baseline_case(HERE / "quick.toml", "mohr_coulomb", 20.0)
+    rough = baselines.surface(case.model_copy(deep=True), "penalty", 0.5)
+    assert rough.rigid.contact == "penalty" and rough.rigid.friction == 0.5
+    rough.check()
+    case.rigid.friction = 0.3  # a penalty key the case sets
+    sticky = baselines.surface(case, "nodes")
+    assert sticky.rigid.contact == "nodes" and sticky.rigid.friction == 0.0
+    assert sticky.title.endswith("no-slip intruder")
+    sticky.check()

@@ -2,7 +2,7 @@
 (seed Fig. 15).
 
     python examples/intrusion/stagnant.py OUT [--depths 0.5 1.0] [--box X0 X1 Z0 Z1]
-        [--png OUT/stagnant.png]
+        [--field rotation_rate|velocity] [--png OUT/stagnant.png]
 
 Reads the run's VTK frames (frames.pvd) and, for the frames nearest the requested d/R,
 draws the points of the first layer next to the symmetry plane y = 0 (y below one point
@@ -10,7 +10,10 @@ spacing of the first cell along y) as tiles of their point spacing in x and z (o
 graded grid, their cell's), coloured by `rotation_rate`, the mean angular speed of the
 RVE's grains (rad/s, seed Eq. 15), with the intruder's section outlined: a stagnant cone
 moves with the intruder and its grains barely roll, while the shear zone around it rolls
-fast. `--box` draws only that part of the plane [m] (default: the grid). Depth and d/R
+fast. `--field velocity` colours the points instead by the share of the intruder's
+speed they move with along its direction (v . e / |v_rigid|, e its direction of travel:
+1 in a zone carried along with it), which a continuum run has too. `--box` draws only
+that part of the plane [m] (default: the grid). Depth and d/R
 come from history.csv. Prints the frames used; the last line is one
 JSON object.
 """
@@ -72,6 +75,7 @@ def main() -> None:
     ap.add_argument("--depths", type=float, nargs="+", default=[0.5, 1.0], help="d/R")
     ap.add_argument("--box", type=float, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
                     help="the part of the plane drawn, m (default: the grid)")
+    ap.add_argument("--field", choices=["rotation_rate", "velocity"], default="rotation_rate")
     ap.add_argument("--png", type=Path, default=None)
     args = ap.parse_args()
     if args.box and not (args.box[0] < args.box[1] and args.box[2] < args.box[3]):
@@ -99,12 +103,21 @@ def main() -> None:
     vmax = 0.0
     data = []
     first_y = point_spacing(case, np.zeros((1, 3)))[0, 1]  # the layer next to y = 0
+    v_rigid = np.asarray(case.rigid.velocity, float)
     for *_, f, _ in chosen:
         x, fields = read_frame(f)
-        rate = np.asarray(fields["rotation_rate"]).ravel()
+        if args.field not in fields:
+            raise SystemExit(f"{f}: no field {args.field!r} (rotation_rate: a multiscale run)")
+        if args.field == "velocity":
+            speed = float(np.linalg.norm(v_rigid))
+            value = np.asarray(fields["velocity"]) @ v_rigid / speed**2
+        else:
+            value = np.asarray(fields["rotation_rate"]).ravel()
         near = x[:, 1] < first_y
-        data.append((x[near], point_spacing(case, x[near]), rate[near]))
-        vmax = max(vmax, float(np.nanpercentile(rate[near], 98)))
+        data.append((x[near], point_spacing(case, x[near]), value[near]))
+        vmax = max(vmax, float(np.nanpercentile(value[near], 98)))
+    if args.field == "velocity":
+        vmax = 1.0
     lo, hi, _ = case.grid.extent()
     x0, x1, z0, z1 = args.box if args.box else (lo[0], hi[0], lo[2], hi[2])
     for ax, (target, d, t, f, depth), (x, h, rate) in zip(axes[0], chosen, data, strict=True):
@@ -119,7 +132,8 @@ def main() -> None:
         ax.set(title=f"d/R = {d:.2f} (t = {t:.2f} s)", xlabel="x (m)", ylabel="z (m)",
                aspect="equal", xlim=(x0, x1), ylim=(z0, z1), facecolor="0.85")
         print(f"d/R {target}: frame {f.name}, d/R {d:.3f}, t {t:.3f} s", flush=True)
-    fig.colorbar(tiles, ax=axes[0].tolist(), label="grain rotation rate (rad/s)")
+    fig.colorbar(tiles, ax=axes[0].tolist(), label="grain rotation rate (rad/s)"
+                 if args.field == "rotation_rate" else "share of the intruder's velocity")
     png = args.png or args.out / "stagnant.png"
     fig.savefig(png, dpi=120)
     print(json.dumps({"png": str(png), "frames": [

@@ -4,7 +4,7 @@ very same geometry.
     python studies/intrusion/baselines.py --phi-from phi.json --out DIR
         [--cases quick.toml quick_cuboid.toml] [--materials mohr_coulomb mu_i]
         [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH]
-        [--to-depth D_OVER_R] [--young E]
+        [--to-depth D_OVER_R] [--young E] [--contact nodes|penalty] [--friction MU]
 
 For each case (in examples/intrusion/ unless a path is given) and material, the case with
 its DEM material replaced by a continuum of friction angle phi (the RVE's, measured by
@@ -14,7 +14,10 @@ history columns are dropped. `--cell-size`, `--points-per-cell` and `--quarter` 
 quarter's side and the bed's depth, m) rerun the same cases on another grid or bed, to
 tell the discretisation's and the boundaries' share of a slope from the material's;
 `--to-depth` drives the intruder deeper than the case does, `--young` sets the
-continuum's Young's modulus [Pa] (default 10 MPa, the RVE's secant modulus).
+continuum's Young's modulus [Pa] (default 10 MPa, the RVE's secant modulus);
+`--contact` and `--friction` replace the intruder's contact (`nodes`: no-slip, a rough
+surface; `penalty` with the Coulomb coefficient `--friction`, default 0: smooth), to
+tell the surface's share of a slope or of the zone that moves with the intruder.
 Then `analyse.py` compares them, e.g.
     python examples/intrusion/analyse.py DIR/mohr_coulomb_quick DIR/mohr_coulomb_quick_cuboid
         --phi-from phi.json
@@ -65,6 +68,23 @@ def baseline_case(path: Path, material: str, phi: float, young: float = YOUNG) -
                                title=f"{case.title}: {material} baseline, phi = {phi:g} deg")
 
 
+def surface(case: gs.Case, contact: str, friction: float = 0.0) -> gs.Case:
+    """The intruder's contact replaced (in place): `nodes` (no-slip) or `penalty` with
+    Coulomb coefficient `friction`; the title says which."""
+    rigid = case.rigid
+    if contact == "nodes":
+        for key in ("penalty", "damping_ratio", "friction"):  # penalty-only keys
+            if key in rigid.model_fields_set:
+                setattr(rigid, key, type(rigid).model_fields[key].default)
+        rigid.contact = "nodes"
+        case.title += ", no-slip intruder"
+    else:
+        rigid.contact = "penalty"
+        rigid.friction = friction
+        case.title += f", penalty contact with friction {friction:g}"
+    return case
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
@@ -73,6 +93,9 @@ def main() -> None:
                     choices=["mohr_coulomb", "mu_i"])
     add_args(ap)
     ap.add_argument("--young", type=float, default=YOUNG, help="Pa (default %(default)g)")
+    ap.add_argument("--contact", choices=["nodes", "penalty"],
+                    help="the intruder's contact (default: the case's)")
+    ap.add_argument("--friction", type=float, help="penalty contact's Coulomb coefficient")
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--phi", type=float, help="friction angle [deg]")
     g.add_argument("--phi-from", type=Path, help="JSON with phi_deg (friction_angle.py)")
@@ -83,6 +106,9 @@ def main() -> None:
     check_args(args.cell_size, args.points_per_cell, args.quarter)
     if not 1e4 <= args.young <= 1e10:
         raise SystemExit(f"--young {args.young:g}: valid 1e4 to 1e10 Pa")
+    if args.friction is not None and not (0.0 <= args.friction <= 2.0
+                                          and args.contact == "penalty"):
+        raise SystemExit(f"--friction {args.friction}: valid 0 to 2, with --contact penalty")
     width, depth = args.quarter if args.quarter is not None else (None, None)
     cases = {}  # every case built (and checked) before the first run
     for name in args.cases:
@@ -94,6 +120,8 @@ def main() -> None:
                            args.points_per_cell, width, depth)
             if args.to_depth is not None:
                 to_depth(case, args.to_depth)
+            if args.contact is not None:
+                surface(case, args.contact, args.friction or 0.0)
             cases[(path, material)] = case
     runs = {}
     for (path, material), case in cases.items():
