@@ -2,7 +2,7 @@
 larger case on the same near-field cells (seed.toml from a seed_quick.toml run).
 
     python studies/intrusion/dem_work.py RUN [--between 0.1 0.6]
-        [--project examples/intrusion/seed.toml] [--ns 95] [--png RUN/dem_work.png]
+        [--project examples/intrusion/seed.toml] [--ns 95]
 
 The frames' `rve_steps` (the DEM steps each point's RVE has taken) at the frames nearest
 the two d/R of `--between`, over the MPM steps between them (history.csv), give each
