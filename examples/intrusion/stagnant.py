@@ -47,13 +47,8 @@ def point_spacing(case: gs.Case, x: np.ndarray) -> np.ndarray:
     """(N, 3) spacing [m] of the points at positions x: the size of the grid cell each
     lies in over the body's points a cell (a uniform grid: cell_size / points_per_cell)."""
     n = case.bodies[0].points_per_cell
-    axes = case.grid.axes()
-    if axes is None:
-        h = case.grid.cell_size
-        h = np.asarray(h if isinstance(h, tuple) else (h, h, h), float)
-        return np.broadcast_to(h / n, x.shape).copy()
     out = np.empty_like(x)
-    for a, nodes in enumerate(axes):
+    for a, nodes in enumerate(case.grid.node_axes()):
         k = np.clip(np.searchsorted(nodes, x[:, a], side="right") - 1, 0, len(nodes) - 2)
         out[:, a] = np.diff(nodes)[k] / n
     return out

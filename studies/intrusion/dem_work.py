@@ -54,10 +54,7 @@ def fill(case: gs.Case) -> np.ndarray:
     sub-cell centres of every cell inside it, n = points_per_cell."""
     body = case.bodies[0]
     n = body.points_per_cell
-    axes = case.grid.axes()
-    if axes is None:
-        lo, hi, cells = case.grid.extent()
-        axes = [np.linspace(lo[k], hi[k], cells[k] + 1) for k in range(3)]
+    axes = case.grid.node_axes()
     sub = []
     for k, a in enumerate(axes):
         inside = (a[:-1] >= body.lo[k] - 1e-9) & (a[1:] <= body.hi[k] + 1e-9)
@@ -74,21 +71,12 @@ def relative(case: gs.Case, x: np.ndarray) -> np.ndarray:
     return x - np.array([axis[0], axis[1], case.bodies[0].hi[2]])
 
 
-def grid_axes(case: gs.Case) -> list[np.ndarray]:
-    """The node coordinates of each axis, uniform grids included."""
-    axes = case.grid.axes()
-    if axes is None:
-        lo, hi, cells = case.grid.extent()
-        axes = [np.linspace(lo[k], hi[k], cells[k] + 1) for k in range(3)]
-    return axes
-
-
 def project(run_case: gs.Case, x0: np.ndarray, work: np.ndarray, target: gs.Case):
     """(work per target point, mask of those inside the run's grid): each point of
     `target` (fill()) takes `work` of the run's point (initially at x0, one a cell) whose
     cell holds the same place relative to the intruder and the surface; the others the
     median of `work`."""
-    axes = grid_axes(run_case)
+    axes = run_case.grid.node_axes()
     origin = relative(run_case, np.array([[a[0] for a in axes]]))[0]
     rel_axes = [a - a[0] + origin[k] for k, a in enumerate(axes)]
     per_cell = np.full([len(a) - 1 for a in axes], np.nan)
@@ -139,7 +127,7 @@ def main() -> None:
         / mpm_steps
     spheres = np.ravel(f1.point_data["rve_particles"])
     x0 = np.asarray(f0.points) - np.asarray(f0.point_data["displacement"])
-    axes = grid_axes(case)
+    axes = case.grid.node_axes()
     ijk = cells_of(axes, x0)
     h = np.stack([np.diff(a)[ijk[:, k]] for k, a in enumerate(axes)], axis=1)
     fine = np.isclose(h.max(axis=1), min(np.diff(a).min() for a in axes))

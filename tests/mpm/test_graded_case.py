@@ -5,6 +5,7 @@ sub-cell volumes, per-axis half-widths)."""
 from __future__ import annotations
 
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -83,6 +84,22 @@ def test_node_lists_and_graded_axes_make_the_grid_and_its_bodies(tmp_path):
     assert s.grid.cell_size.min() == pytest.approx(0.05)
 
 
+def test_node_axes_of_uniform_and_graded_grids(tmp_path):
+    """GridCfg.node_axes: a graded grid's are the solver's own axes; a uniform grid's
+    are origin + i h per axis (to round-off), with its cells + 1 nodes."""
+    graded = _case(tmp_path, GRADED)
+    for got, want in zip(graded.grid.node_axes(), build_state(graded, tmp_path).grid.axes,
+                         strict=True):
+        np.testing.assert_array_equal(got, want)
+    uniform = load_case(Path(__file__).resolve().parents[2] / "examples" / "intrusion"
+                        / "quick.toml").grid
+    assert uniform.axes() is None
+    for a, nodes in enumerate(uniform.node_axes()):
+        assert len(nodes) == uniform.cells[a] + 1
+        np.testing.assert_allclose(nodes, uniform.origin[a] + 0.125 * np.arange(len(nodes)),
+                                   rtol=0, atol=1e-14)
+
+
 @pytest.mark.parametrize("grid, words", [
     ("[grid]\nnodes_x = [0.0, 0.1, 0.1, 0.2]\nnodes_y = [0.0, 0.1]\nnodes_z = [0.0, 0.1]\n",
      ["grid.nodes_x[2] = 0.1", "increase strictly"]),
@@ -151,8 +168,6 @@ def test_the_seed_mesh_cases_load_with_the_seeds_resolution(name):
     0.0625 m cells over the intruder's neighbourhood (x, y to 0.75 m; z from 3.0 to
     4.25 m), 33 x 33 x 34 cells in the 4 m bed, 8 points a cell: 296,208 RVEs, 3 %
     more than the seed's 287,496."""
-    from pathlib import Path
-
     from grainscale.mpm.grid import Grid
     from grainscale.mpm.points import fill_box
 
@@ -178,8 +193,6 @@ def test_the_quick_seed_mesh_case_loads_with_the_seeds_near_field_cells():
     """examples/intrusion/seed_quick.toml: quick.toml's 2 x 2 m quarter of a 1.5 m bed
     with the seed's 0.0625 m cells over x, y <= 0.75 m and z in [0.5, 1.75] m, growing by
     1.5 per cell outward, one point a cell: 17 x 17 x 19 cells in the bed, 5,491 RVEs."""
-    from pathlib import Path
-
     from grainscale.mpm.grid import Grid
     from grainscale.mpm.points import fill_box
 

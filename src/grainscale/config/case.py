@@ -128,6 +128,16 @@ class GridCfg(StrictModel):
         return [np.asarray(v.nodes() if isinstance(v, GradedAxisCfg) else v, dtype=float)
                 for v in (self.nodes_x, self.nodes_y, self.nodes_z)]
 
+    def node_axes(self):
+        """The node coordinates of each axis (3 arrays, m), uniform grids included."""
+        axes = self.axes()
+        if axes is not None:
+            return axes
+        import numpy as np
+
+        lo, hi, cells = self.extent()
+        return [np.linspace(lo[k], hi[k], cells[k] + 1) for k in range(3)]
+
     def extent(self) -> tuple[list[float], list[float], list[int]]:
         """(first node, last node, cells) per axis."""
         axes = self.axes()
