@@ -221,8 +221,13 @@ def resident_against_per_call(base: RVEBatch, p: engine.ContactParams, dt: float
                             for f in ("h", "stress", "stiffness", "ncontact", "unbalanced",
                                       "kinetic"))
     stale = not np.array_equal(per_call.s, dev.host.s)  # the host's s awaits a pull
+    before = dev.moved
+    counter = dev.pull_field("step_count").copy()  # one array, as frames take it
+    field = {"same": bool(np.array_equal(counter, per_call.step_count)),
+             "bytes": dev.moved - before, "nbytes": int(counter.nbytes)}
     host = dev.pull()
     return {"same_results": bool(same_results), "stale_before_pull": bool(stale),
+            "pull_field": field,
             "same_state": {f: bool(np.array_equal(getattr(per_call, f), getattr(host, f)))
                            for f in STATE_FIELDS},
             "capacity": [base.capacity, per_call.capacity, host.capacity],

@@ -219,6 +219,9 @@ def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
     res = sim[case]
     assert res["same_results"]
     assert res["stale_before_pull"]  # positions really stayed on the device
+    # one field pulled alone (the frames' step_count) is the device's, and counted
+    assert res["pull_field"]["same"]
+    assert res["pull_field"]["bytes"] == res["pull_field"]["nbytes"] > 0
     assert all(res["same_state"].values()), res["same_state"]
     start, per_call, resident = res["capacity"]
     assert per_call == resident

@@ -391,7 +391,7 @@ class RVEMaterial:
         for batch in self.groups if self.device == "cuda" else ():  # a kernel counter
             dev = self._dev.get(id(batch))
             if dev is not None and dev.host is batch:
-                dev.arrays["step_count"].copy_to_host(batch.step_count)
+                dev.pull_field("step_count")
         return {
             "porosity": self._per_point(lambda b: b.porosity()),
             "coordination": self._per_point(homogenise.coordination),

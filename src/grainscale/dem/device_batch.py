@@ -136,6 +136,14 @@ class DeviceBatch:
                 self.moved += row.nbytes
         return self.host
 
+    def pull_field(self, name: str) -> np.ndarray:
+        """Copy one state array (a STATE_ARGS name, e.g. the kernel's step_count) from
+        the device into the host batch; returns the host array."""
+        a = getattr(self.host, name)
+        self.arrays[name].copy_to_host(a)
+        self.moved += a.nbytes
+        return a
+
     # ------------------------------------------------------------------ one pass
     def _control(self, ctl, name: str):
         a = np.ascontiguousarray(getattr(ctl, name))
