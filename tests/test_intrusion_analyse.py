@@ -29,14 +29,15 @@ def curve(x, k, p0):
 
 
 def write_run(folder: Path, k: float, p0: float, seed: int, shape="cylinder",
-              columns=COLUMNS, d_max=1.05, sigma=SIGMA) -> Path:
+              columns=COLUMNS, d_max=1.05, sigma=SIGMA, ripple=0.0) -> Path:
     """history.csv as the project writes it (grainscale.io.history.History): a geostatic
     stage (time < 0, depth 0) then the intrusion at 12.5 mm a row; case.resolved.toml."""
     folder.mkdir(parents=True)
     rng = np.random.default_rng(seed)
     h = History(folder / "history.csv", columns, title="synthetic intrusion")
     x = np.arange(0.0, d_max + 1e-9, 0.025)
-    y = curve(x, k, p0) + rng.normal(0.0, sigma, x.size)
+    y = curve(x, k, p0) * (1.0 + ripple * np.sin(2.0 * np.pi * x / 0.25)) \
+        + rng.normal(0.0, sigma, x.size)
     step = 0
     for t in (-0.5, -0.25):
         h.write({c: 0.0 for c in columns} | {"step": step, "time": t, "force": 50.0,
@@ -169,6 +170,24 @@ def test_bad_inputs(tmp_path, capsys):
     short = write_run(tmp_path / "short", 26.0, 3.0, seed=0, d_max=0.3)
     code, _, err = run_main(capsys, [short, "--phi", 26.8])
     assert code == 2 and "short" in err and "--min-span" in err
+
+
+def test_ripple_of_a_known_oscillation(tmp_path, capsys):
+    """A noise-free line times 1 + 0.1 sin(2 pi d/R / 0.25), fitted from d/R 0.3: the
+    rows' departure from the fit is the 10 % oscillation, rms 10/sqrt(2) = 7.07 % and
+    range +-10 %, up to what the fit itself absorbs of three periods sampled at 10 rows
+    each (a few tenths of a percent: 5 % and 10 % tolerances)."""
+    run = write_run(tmp_path / "r", 20.0, 3.0, seed=1, sigma=0.0, ripple=0.1)
+    code, out, err = run_main(capsys, [run, "--phi", 26.8, "--from", 0.3])
+    assert code == 0, err
+    r = json.loads(out.strip().splitlines()[-1])["runs"][0]
+    assert r["ripple_rms_pct"] == pytest.approx(10.0 / np.sqrt(2.0), rel=0.05)
+    lo, hi = r["ripple_range_pct"]
+    assert lo == pytest.approx(-10.0, rel=0.1) and hi == pytest.approx(10.0, rel=0.1)
+    assert "ripple % rms" in out
+    smooth = write_run(tmp_path / "s", 20.0, 3.0, seed=1, sigma=0.0)
+    code, out, err = run_main(capsys, [smooth, "--phi", 26.8, "--from", 0.3])
+    assert json.loads(out.strip().splitlines()[-1])["runs"][0]["ripple_rms_pct"] < 1e-9
 
 
 def test_cut_last_row_is_dropped(tmp_path, capsys):

@@ -48,6 +48,10 @@ turned into the angle it implies (phi_for_k). Where the JSON also gives the angl
 band ("phi_band95_deg", as friction_angle.py writes it), the summary adds K_theory at
 its two ends (`K_theory_band95`): the range of the law that the measured angle allows.
 
+The ripple of each run is the departure of its fitted rows from the fitted line, in %
+of the line's value: printed as its rms and range (`ripple_rms_pct`,
+`ripple_range_pct`), the force ripple of seed Fig. 13's curves.
+
 Writes a plot (--png, default OUT/intrusion.png of the first run): p_u/(rho g R) against
 d/R for every run, each fit over its window, and the theory line K_theory d/R + p_0 (p_0
 of the first run's fit). Prints a table; the last line is one JSON object.
@@ -175,6 +179,10 @@ def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             f = fit_window(r["x"], r["y"], s)
         except InputError as err:
             raise InputError(f"{r['folder']}: {err}") from None
+        # the ripple: each fitted row's departure from the line, in % of the line
+        sel = r["x"] >= s - 1e-12
+        line = f["slope"] * r["x"][sel] + f["intercept"]
+        dev = 100.0 * (r["y"][sel] - line) / line
         try:
             implied = phi_for_k(f["slope"])
         except ValueError:
@@ -184,6 +192,8 @@ def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             "K_phi": f["slope"], "K_phi_stderr": f["slope_se"], "p_0": f["intercept"],
             "p_0_stderr": f["intercept_se"], "window": [float(s), float(r["x"].max())],
             "window_rule": rule, "rows_fitted": f["n"],
+            "ripple_rms_pct": float(np.sqrt(np.mean(dev ** 2))),
+            "ripple_range_pct": [float(dev.min()), float(dev.max())],
             "depth_over_R_max": float(r["x"].max()), "phi_implied_deg": implied})
     first = results[0]
     summary = {"K_phi": first["K_phi"], "K_phi_stderr": first["K_phi_stderr"],
@@ -228,7 +238,8 @@ def plot(runs, results, k_theory, phi_deg, png: Path) -> None:
 
 def table(summary: dict) -> str:
     lines = [f"{'run':<28} {'window d/R':>13} {'rows':>4} {'K_phi +- se':>17} "
-             f"{'p_0 +- se':>16} {'phi(K) deg':>11} {'d/R max':>8}"]
+             f"{'p_0 +- se':>16} {'phi(K) deg':>11} {'d/R max':>8} "
+             f"{'ripple % rms (range)':>22}"]
     for r in summary["runs"]:
         phi = "-" if r["phi_implied_deg"] is None else f"{r['phi_implied_deg']:.2f}"
         win = f"{r['window'][0]:.2f}-{r['window'][1]:.2f}"
@@ -237,7 +248,8 @@ def table(summary: dict) -> str:
         lines.append(f"{r['label']:<28} {win:>13} {r['rows_fitted']:>4} "
                      f"{r['K_phi']:>10.3f} +- {r['K_phi_stderr']:<5.3f}"
                      f"{r['p_0']:>9.3f} +- {r['p_0_stderr']:<5.3f}{phi:>11} "
-                     f"{r['depth_over_R_max']:>8.3f}")
+                     f"{r['depth_over_R_max']:>8.3f} {r['ripple_rms_pct']:>8.1f} "
+                     f"({r['ripple_range_pct'][0]:+.0f} to {r['ripple_range_pct'][1]:+.0f})")
     lines.append(f"modified Archimedes law at phi = {summary['phi_deg']:g} deg: "
                  f"K_theory = {summary['K_theory']:.3f} (first run / theory = "
                  f"{summary['K_phi_over_theory']:.3f})")
