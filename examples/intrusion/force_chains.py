@@ -7,9 +7,9 @@ Reads a multiscale run's probe series (probe_NAME_{contacts,spheres,cell}.pvd, w
 at every frame: docs/coupling.md "Probe RVEs") and prints, for every frame of each probe,
 what the RVE's contact network carries: the intrusion's d/R (from history.csv), where
 the probe's point is (its depth below the intruder's base, from frames.pvd), the RVE's
-pressure p and q/p (Love-Weber, compression positive), the median pressure of the six
-points next to it (one RVE is one sample of a field that scatters from point to point:
-docs/validation.md §3.1), its porosity, the coordination
+pressure p and q/p (Love-Weber, compression positive), the median pressure of the
+points next to it (its face neighbours on the grid: one RVE is one sample of a field
+that scatters from point to point, docs/validation.md §3.1), its porosity, the coordination
 number Z = 2 N_c / N_p (contacts with a positive normal force), the mean normal force,
 the share of contacts in the strong network (normal force above the mean) and the
 vertical fabric of that network, a_z = <n_z^2> - (<n_x^2> + <n_y^2>) / 2 over its
@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
 import grainscale as gs  # noqa: E402
+from grainscale import analysis  # noqa: E402
 
 
 def cell_volume(cell) -> float:
@@ -72,13 +73,14 @@ def network(contacts, spheres, cell) -> dict:
             "porosity": float(np.asarray(data["porosity"][0]).ravel()[0])}
 
 
-def point_context(out: Path, case: gs.Case, point_position, times, depths) -> np.ndarray:
+def point_context(result: gs.Result, case: gs.Case, point_position, times,
+                  depths) -> np.ndarray:
     """(n, 2): at each probe frame, the depth [m] of the probe's point below the
-    intruder's base, and the median pressure [Pa] of its six nearest neighbours by
-    initial position (the points of the faces next to it on the grid): the field the
-    probe's RVE samples. The point is the frame's one whose initial position
-    (position - displacement) is the probe's. NaN where a frame is missing."""
-    by_time = {round(t, 9): mesh for t, mesh in gs.open_result(out).frames()}
+    intruder's base, and the median pressure [Pa] of its face neighbours by initial
+    position (analysis.neighbour_median): the field the probe's RVE samples. The point
+    is the frame's one whose initial position (position - displacement) is the probe's.
+    NaN where a frame is missing."""
+    by_time = {round(t, 9): mesh for t, mesh in result.frames()}
     base0 = case.rigid.center[2] if case.rigid.shape == "cylinder" else case.rigid.lo[2]
     found = np.full((len(times), 2), np.nan)
     for k, (t, depth) in enumerate(zip(times, depths, strict=True)):
@@ -86,11 +88,10 @@ def point_context(out: Path, case: gs.Case, point_position, times, depths) -> np
         if mesh is None:
             continue
         x = np.asarray(mesh.points, float)
-        dist = np.linalg.norm(x - np.asarray(mesh.point_data["displacement"], float)
-                              - np.asarray(point_position), axis=1)
-        near = np.argsort(dist)[:7]  # the point itself first, then its six neighbours
+        x0 = x - np.asarray(mesh.point_data["displacement"], float)
+        i = int(np.argmin(np.linalg.norm(x0 - np.asarray(point_position), axis=1)))
         p = np.asarray(mesh.point_data["p"], float).ravel()
-        found[k] = (base0 - depth) - x[near[0], 2], np.median(p[near[1:]])
+        found[k] = (base0 - depth) - x[i, 2], analysis.neighbour_median(x0, p, [i])[0]
     return found
 
 
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         times = np.array([t for t, _ in series["contacts"]])
         d_over_r = np.interp(times, hist["time"], hist["depth_over_R"])
         depth = np.interp(times, hist["time"], hist["depth"])
-        context = point_context(args.out, case, known[name]["point_position"], times, depth)
+        context = point_context(result, case, known[name]["point_position"], times, depth)
         rows = []
         print(f"probe {name!r} (point {known[name]['point']}, initially at "
               f"{known[name]['point_position']} m)")

@@ -9,7 +9,8 @@ twice what chaos alone leaves between two such means), or "fail".
 
 Also here, for scripts: the deposit of a collapse (deposit_profile, front_at_thickness),
 the intrusion's theory (k_phi, phi_for_k: seed Eq. 29), stress invariants (p_q), one
-VTK frame's points and fields (read_frame).
+VTK frame's points and fields (read_frame) and the field a point samples
+(neighbour_median).
 """
 
 from __future__ import annotations
@@ -164,6 +165,47 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
 
 
 
+def neighbour_median(x0: np.ndarray, values: np.ndarray, which: np.ndarray,
+                     rel_tol: float = 0.1) -> np.ndarray:
+    """Median of a point field over each point's face neighbours, the field it samples.
+
+    A point's neighbours are the points nearest to it by initial position, all those
+    within (1 + rel_tol) of the nearest distance: on a grid filled with one point a cell
+    (or n a cell along each axis), its face neighbours, up to six, fewer on a boundary
+    or a symmetry plane, where the mirror point is missing (a fixed count of nearest
+    points would take diagonal ones there, at sqrt(2) the distance).
+
+    Parameters
+    ----------
+    x0 : numpy.ndarray
+        (N, 3) the points' initial positions [m] (a frame's position - displacement).
+    values : numpy.ndarray
+        (N,) the field, e.g. a frame's `p`.
+    which : numpy.ndarray
+        Indices of the points to evaluate.
+    rel_tol : float, default 0.1
+        How much farther than the nearest a neighbour may be, relative.
+
+    Returns
+    -------
+    numpy.ndarray
+        The median of `values` over each point's neighbours, one per index in `which`.
+
+    Examples
+    --------
+    >>> from grainscale import analysis
+    >>> x0 = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [3.5, 0, 0]])
+    >>> analysis.neighbour_median(x0, np.array([1.0, 2.0, 4.0, 8.0]), np.array([1, 3]))
+    array([2.5, 4. ])
+    """
+    out = np.empty(len(which))
+    for n, i in enumerate(which):
+        d = np.linalg.norm(x0 - x0[i], axis=1)
+        d[i] = np.inf
+        out[n] = np.median(values[d <= (1.0 + rel_tol) * d.min()])
+    return out
+
+
 def deposit_profile(along: np.ndarray, up: np.ndarray, lp: np.ndarray | float,
                     spacing: float, base: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Thickness of a layer of points along one axis, such as a collapse's deposit.
@@ -274,6 +316,6 @@ def plot_flow(path: str | Path, table: dict, fits: dict, title: str = "") -> Non
     plot(path, table, fits, title=title)
 
 
-__all__ = ["deposit_profile", "deviation", "front_at_thickness", "k_phi", "p_q",
+__all__ = ["deposit_profile", "deviation", "front_at_thickness", "k_phi", "neighbour_median", "p_q",
            "phi_for_k", "plot_flow", "plot_stress_path", "read_columns", "read_frame",
            "unit_element_metrics", "write_columns"]

@@ -85,19 +85,20 @@ def test_node_lists_and_graded_axes_make_the_grid_and_its_bodies(tmp_path):
 
 
 def test_node_axes_of_uniform_and_graded_grids(tmp_path):
-    """GridCfg.node_axes: a graded grid's are the solver's own axes; a uniform grid's
-    are origin + i h per axis (to round-off), with its cells + 1 nodes."""
+    """GridCfg.node_axes is the solver's node coordinates, graded or uniform."""
+    from grainscale.mpm.setup import build_grid
+
     graded = _case(tmp_path, GRADED)
     for got, want in zip(graded.grid.node_axes(), build_state(graded, tmp_path).grid.axes,
                          strict=True):
         np.testing.assert_array_equal(got, want)
     uniform = load_case(Path(__file__).resolve().parents[2] / "examples" / "intrusion"
-                        / "quick.toml").grid
-    assert uniform.axes() is None
-    for a, nodes in enumerate(uniform.node_axes()):
-        assert len(nodes) == uniform.cells[a] + 1
-        np.testing.assert_allclose(nodes, uniform.origin[a] + 0.125 * np.arange(len(nodes)),
-                                   rtol=0, atol=1e-14)
+                        / "quick.toml")
+    assert uniform.grid.axes() is None
+    solver = build_grid(uniform).node_axes()
+    for a, nodes in enumerate(uniform.grid.node_axes()):
+        assert len(nodes) == uniform.grid.cells[a] + 1
+        np.testing.assert_array_equal(nodes, solver[a])
 
 
 @pytest.mark.parametrize("grid, words", [

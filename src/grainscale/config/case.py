@@ -129,14 +129,16 @@ class GridCfg(StrictModel):
                 for v in (self.nodes_x, self.nodes_y, self.nodes_z)]
 
     def node_axes(self):
-        """The node coordinates of each axis (3 arrays, m), uniform grids included."""
+        """The node coordinates of each axis (3 arrays, m), uniform grids included (as
+        the solver's Grid.node_axes computes them, without a periodic axis' padding)."""
         axes = self.axes()
         if axes is not None:
             return axes
         import numpy as np
 
-        lo, hi, cells = self.extent()
-        return [np.linspace(lo[k], hi[k], cells[k] + 1) for k in range(3)]
+        size = self.cell_size if isinstance(self.cell_size, tuple) else (self.cell_size,) * 3
+        return [self.origin[k] + np.arange(self.cells[k] + 1) * float(size[k])
+                for k in range(3)]
 
     def extent(self) -> tuple[list[float], list[float], list[int]]:
         """(first node, last node, cells) per axis."""
