@@ -174,18 +174,22 @@ def test_bad_inputs(tmp_path, capsys):
 
 def test_ripple_of_a_known_oscillation(tmp_path, capsys):
     """A noise-free line times 1 + 0.1 sin(2 pi d/R / 0.25), fitted from d/R 0.3: the
-    rows' departure from the fit is the 10 % oscillation, rms 10/sqrt(2) = 7.07 % and
-    range +-10 %. Ten rows a period sample the sine at 36 deg steps, so its peaks are
-    sampled at sin 72 deg = 9.5 % at best, and the fit takes up a little of three
-    periods: measured 7.12 % rms and -9.9 to +9.5 %, within the 5 % and 10 %
-    tolerances."""
+    rows' departure from the fit is the oscillation 0.1 sin(...) times the line, in % of
+    the rows' mean, computed here on the same rows from the true line. The fit takes up
+    a little of three periods sampled at 10 rows each: measured 7.341 % rms against
+    7.344 from the true line and the range within 0.03 points of it; tolerances 2 % and
+    1 point, well below what a wrong normaliser (the local line: 7.07 %, range +-10)
+    would give."""
     run = write_run(tmp_path / "r", 20.0, 3.0, seed=1, sigma=0.0, ripple=0.1)
     code, out, err = run_main(capsys, [run, "--phi", 26.8, "--from", 0.3])
     assert code == 0, err
     r = json.loads(out.strip().splitlines()[-1])["runs"][0]
-    assert r["ripple_rms_pct"] == pytest.approx(10.0 / np.sqrt(2.0), rel=0.05)
-    lo, hi = r["ripple_range_pct"]
-    assert lo == pytest.approx(-10.0, rel=0.1) and hi == pytest.approx(10.0, rel=0.1)
+    x = np.arange(0.0, 1.05 + 1e-9, 0.025)
+    x = x[x >= 0.3 - 1e-12]
+    y = curve(x, 20.0, 3.0) * (1.0 + 0.1 * np.sin(2.0 * np.pi * x / 0.25))
+    true = 100.0 * (y - curve(x, 20.0, 3.0)) / y.mean()
+    assert r["ripple_rms_pct"] == pytest.approx(np.sqrt(np.mean(true ** 2)), rel=0.02)
+    assert r["ripple_range_pct"] == pytest.approx([true.min(), true.max()], abs=1.0)
     assert "ripple % rms" in out
     smooth = write_run(tmp_path / "s", 20.0, 3.0, seed=1, sigma=0.0)
     code, out, err = run_main(capsys, [smooth, "--phi", 26.8, "--from", 0.3])

@@ -49,7 +49,8 @@ band ("phi_band95_deg", as friction_angle.py writes it), the summary adds K_theo
 its two ends (`K_theory_band95`): the range of the law that the measured angle allows.
 
 The ripple of each run is the departure of its fitted rows from the fitted line, in %
-of the line's value: printed as its rms and range (`ripple_rms_pct`,
+of the fitted rows' mean (studies/intrusion/ripple.py's measure): printed as its rms and
+range (`ripple_rms_pct`,
 `ripple_range_pct`), the force ripple of seed Fig. 13's curves.
 
 Writes a plot (--png, default OUT/intrusion.png of the first run): p_u/(rho g R) against
@@ -179,10 +180,11 @@ def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             f = fit_window(r["x"], r["y"], s)
         except InputError as err:
             raise InputError(f"{r['folder']}: {err}") from None
-        # the ripple: each fitted row's departure from the line, in % of the line
+        # the ripple: each fitted row's departure from the line, in % of the rows' mean
+        # (ripple.py's measure; the line's own value vanishes near d/R 0)
         sel = r["x"] >= s - 1e-12
         line = f["slope"] * r["x"][sel] + f["intercept"]
-        dev = 100.0 * (r["y"][sel] - line) / line
+        dev = 100.0 * (r["y"][sel] - line) / np.mean(r["y"][sel])
         try:
             implied = phi_for_k(f["slope"])
         except ValueError:
