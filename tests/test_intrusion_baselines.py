@@ -102,11 +102,34 @@ def test_surface_replaces_the_intruders_contact():
     loader refuses them with nodes); --contact penalty --friction 0.5: a rough penalty
     surface. Both pass the loader's checks and say so in the title."""
     case = baselines.baseline_case(HERE / "quick.toml", "mohr_coulomb", 20.0)
-    rough = baselines.surface(case.model_copy(deep=True), "penalty", 0.5)
+    rough = reshape.surface(case.model_copy(deep=True), "penalty", 0.5)
     assert rough.rigid.contact == "penalty" and rough.rigid.friction == 0.5
     rough.check()
     case.rigid.friction = 0.3  # a penalty key the case sets
-    sticky = baselines.surface(case, "nodes")
+    sticky = reshape.surface(case, "nodes")
     assert sticky.rigid.contact == "nodes" and sticky.rigid.friction == 0.0
     assert sticky.title.endswith("no-slip intruder")
     sticky.check()
+
+
+def test_reshape_cli_makes_the_graded_multiscale_intruder_rough(tmp_path):
+    """seed_quick.toml with --contact penalty --friction 0.5: the same case (grid, RVE,
+    probes) but for the intruder's friction and the end time; --friction without the
+    penalty contact is refused, naming the option and its valid range."""
+    out = tmp_path / "rough.toml"
+    cmd = [sys.executable, str(STUDIES / "intrusion" / "reshape.py"),
+           str(HERE / "seed_quick.toml"), "--out", str(out)]
+    subprocess.run(cmd + ["--contact", "penalty", "--friction", "0.5", "--to-depth", "0.45"],
+                   check=True, capture_output=True)
+    old = tomllib.loads((HERE / "seed_quick.toml").read_text())
+    new = tomllib.loads(out.read_text())
+    assert new["rigid"]["friction"] == 0.5 and new["rigid"]["contact"] == "penalty"
+    assert new["time"]["end"] == pytest.approx(0.1 + 0.45 * 0.5 / 0.25)  # ramp/2 + d/v
+    for key in ("grid", "rve", "materials", "bodies"):
+        assert new[key] == old[key]
+    assert new["output"]["probes"] == old["output"]["probes"]
+    assert "friction 0.5" in gs.load_case(out).title
+    bad = subprocess.run(cmd[:-1] + [str(tmp_path / "x.toml"), "--friction", "0.5"],
+                         capture_output=True, text=True)
+    assert bad.returncode != 0 and "--friction 0.5: valid 0 to 2, with --contact penalty" \
+        in bad.stderr

@@ -33,7 +33,7 @@ import math
 import sys
 from pathlib import Path
 
-from reshape import add_args, check_args, reshape, to_depth
+from reshape import add_args, check_args, reshape, surface, to_depth
 
 import grainscale as gs
 
@@ -68,23 +68,6 @@ def baseline_case(path: Path, material: str, phi: float, young: float = YOUNG) -
                                title=f"{case.title}: {material} baseline, phi = {phi:g} deg")
 
 
-def surface(case: gs.Case, contact: str, friction: float = 0.0) -> gs.Case:
-    """The intruder's contact replaced (in place): `nodes` (no-slip) or `penalty` with
-    Coulomb coefficient `friction`; the title says which."""
-    rigid = case.rigid
-    if contact == "nodes":
-        for key in ("penalty", "damping_ratio", "friction"):  # penalty-only keys
-            if key in rigid.model_fields_set:
-                setattr(rigid, key, type(rigid).model_fields[key].default)
-        rigid.contact = "nodes"
-        case.title += ", no-slip intruder"
-    else:
-        rigid.contact = "penalty"
-        rigid.friction = friction
-        case.title += f", penalty contact with friction {friction:g}"
-    return case
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
@@ -93,9 +76,6 @@ def main() -> None:
                     choices=["mohr_coulomb", "mu_i"])
     add_args(ap)
     ap.add_argument("--young", type=float, default=YOUNG, help="Pa (default %(default)g)")
-    ap.add_argument("--contact", choices=["nodes", "penalty"],
-                    help="the intruder's contact (default: the case's)")
-    ap.add_argument("--friction", type=float, help="penalty contact's Coulomb coefficient")
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--phi", type=float, help="friction angle [deg]")
     g.add_argument("--phi-from", type=Path, help="JSON with phi_deg (friction_angle.py)")
@@ -103,12 +83,10 @@ def main() -> None:
     phi = args.phi if args.phi is not None else json.loads(args.phi_from.read_text())["phi_deg"]
     if not 0.0 < phi < 60.0:
         raise SystemExit(f"phi = {phi} deg: valid 0 < phi < 60")
-    check_args(args.cell_size, args.points_per_cell, args.quarter)
+    check_args(args.cell_size, args.points_per_cell, args.quarter, args.contact,
+               args.friction)
     if not 1e4 <= args.young <= 1e10:
         raise SystemExit(f"--young {args.young:g}: valid 1e4 to 1e10 Pa")
-    if args.friction is not None and not (0.0 <= args.friction <= 2.0
-                                          and args.contact == "penalty"):
-        raise SystemExit(f"--friction {args.friction}: valid 0 to 2, with --contact penalty")
     width, depth = args.quarter if args.quarter is not None else (None, None)
     cases = {}  # every case built (and checked) before the first run
     for name in args.cases:

@@ -1,16 +1,23 @@
-"""An intrusion case on another grid or in another bed, written as a new case file.
+"""An intrusion case on another grid, in another bed or with another intruder surface,
+written as a new case file.
 
     python studies/intrusion/reshape.py CASE --out NEW.toml
         [--cell-size H] [--points-per-cell N] [--quarter WIDTH DEPTH] [--to-depth D_OVER_R]
+        [--contact nodes|penalty] [--friction MU]
 
 `--quarter` sets the quarter's side and the bed's depth [m]; the intruder's base stays
 on the bed's surface and the probes keep their depth below it, so the new case is the
 same experiment in a wider or deeper bed. `--to-depth` ends the run when the intruder
-reaches that d/R (time.end from its ramp and velocity). For example the quick multiscale cylinder in
-the seed's 5 x 5 m quarter of a 4 m bed (51,200 RVEs; docs/validation.md §3):
+reaches that d/R (time.end from its ramp and velocity). `--contact` and `--friction`
+replace the intruder's contact (`nodes`: no-slip; `penalty` with the Coulomb coefficient
+`--friction`, default 0: smooth). For example the quick multiscale cylinder in the
+seed's 5 x 5 m quarter of a 4 m bed (51,200 RVEs; docs/validation.md §3), or
+seed_quick's cylinder made rough:
 
     python studies/intrusion/reshape.py examples/intrusion/quick.toml --quarter 5 4 \
         --out seed_bed.toml
+    python studies/intrusion/reshape.py examples/intrusion/seed_quick.toml \
+        --contact penalty --friction 0.5 --to-depth 0.45 --out rough.toml
 """
 
 from __future__ import annotations
@@ -86,15 +93,36 @@ def to_depth(case: gs.Case, depth_over_r: float) -> gs.Case:
     return case
 
 
+def surface(case: gs.Case, contact: str, friction: float = 0.0) -> gs.Case:
+    """The intruder's contact replaced (in place): `nodes` (no-slip) or `penalty` with
+    Coulomb coefficient `friction`; the title says which."""
+    rigid = case.rigid
+    if contact == "nodes":
+        for key in ("penalty", "damping_ratio", "friction"):  # penalty-only keys
+            if key in rigid.model_fields_set:
+                setattr(rigid, key, type(rigid).model_fields[key].default)
+        rigid.contact = "nodes"
+        case.title += ", no-slip intruder"
+    else:
+        rigid.contact = "penalty"
+        rigid.friction = friction
+        case.title += f", penalty contact with friction {friction:g}"
+    return case
+
+
 def check_args(cell: float | None, points_per_cell: int | None,
-               quarter: list[float] | None) -> None:
-    """Refuse a grid or bed the intruder (R = 0.5 m) does not fit, naming the option."""
+               quarter: list[float] | None, contact: str | None = None,
+               friction: float | None = None) -> None:
+    """Refuse a grid or bed the intruder (R = 0.5 m) does not fit, or a friction without
+    the penalty contact, naming the option."""
     if cell is not None and not 0.0 < cell <= 0.5:
         raise SystemExit(f"--cell-size {cell}: valid 0 < h <= 0.5 m")
     if points_per_cell is not None and not 1 <= points_per_cell <= 4:
         raise SystemExit(f"--points-per-cell {points_per_cell}: valid 1 to 4")
     if quarter is not None and not all(x > 1.0 for x in quarter):
         raise SystemExit(f"--quarter {quarter}: valid side and depth > 1 m (R = 0.5 m)")
+    if friction is not None and not (0.0 <= friction <= 2.0 and contact == "penalty"):
+        raise SystemExit(f"--friction {friction}: valid 0 to 2, with --contact penalty")
 
 
 def add_args(ap: argparse.ArgumentParser) -> None:
@@ -104,6 +132,9 @@ def add_args(ap: argparse.ArgumentParser) -> None:
                     help="the quarter's side and the bed's depth, m")
     ap.add_argument("--to-depth", type=float, metavar="D_OVER_R",
                     help="end when the intruder is this many radii deep")
+    ap.add_argument("--contact", choices=["nodes", "penalty"],
+                    help="the intruder's contact (default: the case's)")
+    ap.add_argument("--friction", type=float, help="penalty contact's Coulomb coefficient")
 
 
 def main() -> None:
@@ -112,7 +143,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True, help="the new case file")
     add_args(ap)
     args = ap.parse_args()
-    check_args(args.cell_size, args.points_per_cell, args.quarter)
+    check_args(args.cell_size, args.points_per_cell, args.quarter, args.contact,
+               args.friction)
     if args.out.exists():
         raise SystemExit(f"--out {args.out}: exists; not overwritten")
     try:
@@ -123,6 +155,8 @@ def main() -> None:
     reshape(case, args.cell_size, args.points_per_cell, width, depth)
     if args.to_depth is not None:
         to_depth(case, args.to_depth)
+    if args.contact is not None:
+        surface(case, args.contact, args.friction or 0.0)
     if args.quarter is not None:
         case.title += f" in a {width:g} x {width:g} m quarter of a {depth:g} m bed"
     case.check().save(args.out)
