@@ -59,14 +59,28 @@ def test_compaction_friction_sets_the_density(base):
 
 def test_consolidation_pressure_is_where_the_porosity_is_set(base):
     """consolidation_pressure = 1 MPa: the compaction stage reports that pressure, then
-    the packing is unloaded to 50 kPa. Unloading is elastic (strain ~ p_c / E = 1 %, of
-    which the porosity keeps far less), so the porosity stays within 2e-3 of the packing
-    compacted at 50 kPa directly (measured 3e-4)."""
+    the packing is unloaded to 50 kPa, to rest there.
+
+    Compressed to 20 times the target pressure the packing is denser than the one
+    compacted at 50 kPa directly by at least the order of p_c/E = 1 % of volumetric
+    strain (a loose frictional packing is softer than its grains; measured 0.039-0.044
+    in porosity over seeds 4-6). Unloading gives most of it back elastically (measured
+    87-97 %, so more than half), and leaves the packing no looser than the direct one:
+    measured 1.3e-3 to 5.1e-3 denser over seeds 4-6; the bound allows 5e-3 looser, about
+    the spread of one 100-sphere packing's porosity between seeds (0.4295, 0.434, 0.441).
+    The two packings follow different compaction paths from the same gas, so their
+    porosities differ by chance as two realisations do, by CPU as well as by seed."""
     b, lines = _generate(_params({"consolidation_pressure": 1e6}))
     assert max(_pressures(lines)) == pytest.approx(1e6, rel=0.01), lines
     assert max(_pressures(base[1])) == pytest.approx(50e3, rel=0.01), base[1]
     _at_rest_at(b, 50e3)
-    assert abs(float(b.porosity()[0]) - float(base[0].porosity()[0])) < 2e-3
+    n_loaded, p_loaded = map(float, re.search(r"porosity (\S+) at p = (\S+) Pa",
+                                              lines[0]).groups())  # the compaction stage
+    assert p_loaded == pytest.approx(1e6, rel=0.01), lines
+    n_direct, n_final = float(base[0].porosity()[0]), float(b.porosity()[0])
+    assert n_direct - n_loaded > 0.01, (n_loaded, n_direct)
+    assert n_final - n_loaded > 0.5 * (n_direct - n_loaded), (n_loaded, n_final, n_direct)
+    assert n_final < n_direct + 5e-3, (n_final, n_direct)
 
 
 @pytest.mark.parametrize("porosity", [0.6, 0.8])
