@@ -227,3 +227,25 @@ def test_stagnant_tiles_take_each_points_cell_on_uniform_and_graded_grids():
     np.testing.assert_allclose(h[:, 0], [0.0625, first_coarse], rtol=1e-12)
     np.testing.assert_allclose(h[:, 2], 0.0625, rtol=1e-9)
     assert stagnant.intruder_section(graded, 0.25) == pytest.approx((-0.5, 1.25, 1.0, 1.0))
+
+
+def test_carried_depth_counts_down_the_column_to_the_first_slower_point():
+    """A column of 0.1 m tiles under a base at z = 1: shares 1, 0.9, 0.7, then 0.5 and
+    0.8 below; the zone moving with >= 0.6 of the intruder's velocity ends at the third
+    tile's lower face, 0.3 m below the base (the 0.8 under the slower point is not
+    counted). Points above the base and in the next column are not the column's; a
+    column whose first point is slower carries nothing."""
+    z = np.array([1.05, 0.95, 0.85, 0.75, 0.65, 0.55])
+    x = np.column_stack([np.full(6, 0.05), np.zeros(6), z])
+    share = np.array([1.0, 1.0, 0.9, 0.7, 0.5, 0.8])
+    other = np.array([[0.15, 0.0, 0.95], [0.15, 0.0, 0.85]])  # the next column, all carried
+    x = np.vstack([x, other])
+    share = np.concatenate([share, [1.0, 1.0]])
+    h = np.full_like(x, 0.1)
+    order = np.random.default_rng(0).permutation(len(x))  # the frame's order is arbitrary
+    depth = stagnant.carried_depth(x[order], h[order], share[order], 1.0, 0.02)
+    assert depth == pytest.approx(0.3, abs=1e-12)
+    assert stagnant.carried_depth(x, h, share, 1.0, 0.02, threshold=0.95) == pytest.approx(0.1)
+    assert stagnant.carried_depth(x, h, share, 1.0, 0.15) == pytest.approx(0.2)
+    share[1] = 0.3
+    assert stagnant.carried_depth(x, h, share, 1.0, 0.02) == 0.0

@@ -13,9 +13,14 @@ moves with the intruder and its grains barely roll, while the shear zone around 
 fast. `--field velocity` colours the points instead by the share of the intruder's
 speed they move with along its direction (v . e / |v_rigid|, e its direction of travel:
 1 in a zone carried along with it), which a continuum run has too. `--box` draws only
-that part of the plane [m] (default: the grid). Depth and d/R
-come from history.csv. Prints the frames used; the last line is one
-JSON object.
+that part of the plane [m] (default: the grid). Depth and d/R come from history.csv.
+
+For each frame it also measures the zone carried with the intruder (`carried_depth`):
+how far below the base, next to the axis (0.05 R) and at 0.9 R, the points move with at least
+`--carried` (default 0.6) of its velocity, counted down from the base to the first point
+that does not. A stagnant cone reaches deeper on the axis than at the edge; a layer
+pushed ahead of a smooth base is as deep at both. Prints the frames used and these
+depths; the last line is one JSON object.
 """
 
 from __future__ import annotations
@@ -64,6 +69,22 @@ def intruder_section(case: gs.Case, depth: float) -> tuple[float, float, float, 
     return rigid.lo[0], rigid.lo[2] - depth, rigid.hi[0] - rigid.lo[0], rigid.hi[2] - rigid.lo[2]
 
 
+def carried_depth(x: np.ndarray, spacing: np.ndarray, share: np.ndarray, base_z: float,
+                  x_col: float, threshold: float = 0.6) -> float:
+    """Depth [m] below the intruder's base (at height base_z, m) to which the points of
+    the column at x_col (those whose tile, x +- spacing/2, spans it) move with at least
+    `threshold` of the intruder's velocity: counting down from the base, the lower face
+    of the last point's tile before the first point that moves slower (0 if the first
+    one does). x (N,3) and spacing (N,3) [m], share (N,) (v . e / |v_rigid|)."""
+    col = (np.abs(x[:, 0] - x_col) <= spacing[:, 0] / 2) & (x[:, 2] < base_z)
+    depth = 0.0
+    for k in np.flatnonzero(col)[np.argsort(-x[col, 2])]:
+        if share[k] < threshold:
+            break
+        depth = base_z - (x[k, 2] - spacing[k, 2] / 2)
+    return depth
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
@@ -71,8 +92,12 @@ def main() -> None:
     ap.add_argument("--box", type=float, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
                     help="the part of the plane drawn, m (default: the grid)")
     ap.add_argument("--field", choices=["rotation_rate", "velocity"], default="rotation_rate")
+    ap.add_argument("--carried", type=float, default=0.6,
+                    help="share of the intruder's velocity that counts as carried")
     ap.add_argument("--png", type=Path, default=None)
     args = ap.parse_args()
+    if not 0.0 < args.carried < 1.0:
+        raise SystemExit(f"--carried {args.carried}: valid 0 < share < 1")
     if args.box and not (args.box[0] < args.box[1] and args.box[2] < args.box[3]):
         raise SystemExit(f"--box {args.box}: valid X0 < X1 and Z0 < Z1 (m)")
     try:
@@ -96,20 +121,24 @@ def main() -> None:
     fig, axes = plt.subplots(1, len(chosen), figsize=(4.6 * len(chosen) + 1, 4.2),
                              squeeze=False, constrained_layout=True)
     vmax = 0.0
-    data = []
+    data, carried = [], []
     first_y = point_spacing(case, np.zeros((1, 3)))[0, 1]  # the layer next to y = 0
     v_rigid = np.asarray(case.rigid.velocity, float)
-    for *_, f, _ in chosen:
+    for *_, f, depth in chosen:
         x, fields = read_frame(f)
-        if args.field not in fields:
-            raise SystemExit(f"{f}: no field {args.field!r} (rotation_rate: a multiscale run)")
-        if args.field == "velocity":
-            speed = float(np.linalg.norm(v_rigid))
-            value = np.asarray(fields["velocity"]) @ v_rigid / speed**2
-        else:
-            value = np.asarray(fields["rotation_rate"]).ravel()
+        for name in {args.field, "velocity"}:
+            if name not in fields:
+                raise SystemExit(f"{f}: no field {name!r} (rotation_rate: a multiscale run)")
+        share = np.asarray(fields["velocity"]) @ v_rigid / float(v_rigid @ v_rigid)
+        value = share if args.field == "velocity" else np.asarray(fields["rotation_rate"]).ravel()
         near = x[:, 1] < first_y
-        data.append((x[near], point_spacing(case, x[near]), value[near]))
+        h = point_spacing(case, x[near])
+        data.append((x[near], h, value[near]))
+        bx, bz, w, _ = intruder_section(case, depth)
+        half = w / 2  # the section spans the axis +- R (+- the half-width of a box)
+        carried.append({where: carried_depth(x[near], h, share[near], bz, bx + half + frac * half,
+                                             args.carried)
+                        for where, frac in (("axis", 0.05), ("edge", 0.9))})
         vmax = max(vmax, float(np.nanpercentile(value[near], 98)))
     if args.field == "velocity":
         vmax = 1.0
@@ -127,12 +156,17 @@ def main() -> None:
         ax.set(title=f"d/R = {d:.2f} (t = {t:.2f} s)", xlabel="x (m)", ylabel="z (m)",
                aspect="equal", xlim=(x0, x1), ylim=(z0, z1), facecolor="0.85")
         print(f"d/R {target}: frame {f.name}, d/R {d:.3f}, t {t:.3f} s", flush=True)
+    for (_, d, *_), c in zip(chosen, carried, strict=True):
+        print(f"d/R {d:.3f}: moving with >= {args.carried:g} of the intruder's velocity to "
+              f"{c['axis']:.3f} m below the base on the axis, {c['edge']:.3f} m at 0.9 R")
     fig.colorbar(tiles, ax=axes[0].tolist(), label="grain rotation rate (rad/s)"
                  if args.field == "rotation_rate" else "share of the intruder's velocity")
     png = args.png or args.out / "stagnant.png"
     fig.savefig(png, dpi=120)
-    print(json.dumps({"png": str(png), "frames": [
-        {"depth_over_R": round(d, 4), "time": t, "file": f.name} for _, d, t, f, _ in chosen]}))
+    print(json.dumps({"png": str(png), "carried_share": args.carried, "frames": [
+        {"depth_over_R": round(d, 4), "time": t, "file": f.name,
+         "carried_depth_axis": round(c["axis"], 4), "carried_depth_edge": round(c["edge"], 4)}
+        for (_, d, t, f, _), c in zip(chosen, carried, strict=True)]}))
 
 
 if __name__ == "__main__":
