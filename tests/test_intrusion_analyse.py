@@ -249,3 +249,20 @@ def test_carried_depth_counts_down_the_column_to_the_first_slower_point():
     assert stagnant.carried_depth(x, h, share, 1.0, 0.15) == pytest.approx(0.2)
     share[1] = 0.3
     assert stagnant.carried_depth(x, h, share, 1.0, 0.02) == 0.0
+
+
+def test_to_compares_runs_of_different_depths_over_the_same_span(tmp_path, capsys):
+    """--to 0.6: the rows deeper than d/R 0.6 are left out of both runs (one to 1.05, one
+    to 0.7), so both windows are [0.3, 0.6], 13 rows at 0.025 apart, and both slopes are
+    the curve's 26 within 4 standard errors (sigma / sqrt(Sxx) = 0.1 / sqrt(0.114) = 0.30
+    for those rows). Too few rows left is refused, naming --to."""
+    deep = write_run(tmp_path / "deep", 26.0, 3.0, seed=5)
+    short = write_run(tmp_path / "short", 26.0, 3.0, seed=6, d_max=0.7)
+    code, out, err = run_main(capsys, [deep, short, "--phi", 25.0, "--from", 0.3,
+                                       "--to", 0.6])
+    assert code == 0, err
+    for r in json.loads(out.strip().splitlines()[-1])["runs"]:
+        assert r["window"] == [0.3, pytest.approx(0.6)] and r["rows_fitted"] == 13
+        assert r["K_phi"] == pytest.approx(26.0, abs=4 * 0.1 / np.sqrt(0.11375))
+    code, out, err = run_main(capsys, [deep, "--phi", 25.0, "--to", 0.05])
+    assert code == 2 and "--to 0.05" in err and "need 4" in err

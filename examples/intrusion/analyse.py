@@ -1,7 +1,7 @@
 """Steady intrusion slope K_phi of intrusion runs against the modified Archimedes law.
 
     python examples/intrusion/analyse.py OUT [OUT2 ...] (--phi DEG | --phi-from FILE)
-        [--from D] [--tol 0.002] [--min-span 0.4] [--png PATH]
+        [--from D] [--to D] [--tol 0.002] [--min-span 0.4] [--png PATH]
 
 Each OUT is the output folder of an intrusion run (validation case 3, seed section 4.3):
 its history.csv must have the columns depth_over_R (d/R) and force_normalized
@@ -11,7 +11,8 @@ out. The label of a run is its folder name and, from case.resolved.toml, the int
 [rigid] shape.
 
 For each run, the steady regime p_u/(rho g R) = K_phi d/R + p_0 is fitted by least
-squares over d/R in [s, d_max], d_max the deepest row. The window start s is, by default,
+squares over d/R in [s, d_max], d_max the deepest row (or the deepest at d/R <= --to:
+runs that went to different depths compared over the same span). The window start s is, by default,
 chosen by a slope-stability rule: s is the smallest of 0, 0.05, 0.10, ... (in units of R)
 such that moving the start 0.1 R and 0.2 R deeper changes the fitted slope K(s) by less
 than
@@ -169,8 +170,15 @@ def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
 
 def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             tol: float = 0.002, min_span: float = 0.4, png: Path | None = None,
-            phi_band: float | None = None) -> dict:
+            phi_band: float | None = None, stop: float | None = None) -> dict:
     runs = [load_run(o) for o in outs]
+    if stop is not None:  # the rows beyond --to left out, before the rule and the fit
+        for r in runs:
+            keep = r["x"] <= stop + 1e-12
+            if np.count_nonzero(keep) < 4:
+                raise InputError(f"{r['folder']}: {np.count_nonzero(keep)} rows at d/R <= "
+                                 f"--to {stop:g}, need 4")
+            r["x"], r["y"] = r["x"][keep], r["y"][keep]
     k_theory = k_phi(phi_deg)
     results = []
     for r in runs:
@@ -287,6 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     src.add_argument("--phi-from", type=Path, help='JSON file with {"phi_deg": ...}')
     ap.add_argument("--from", dest="start", type=float, default=None,
                     help="fix the window start d/R (default: the slope-stability rule)")
+    ap.add_argument("--to", dest="stop", type=float, default=None,
+                    help="leave out the rows deeper than this d/R (default: none)")
     ap.add_argument("--tol", type=float, default=0.002,
                     help="relative slope change the rule always accepts (default 0.002)")
     ap.add_argument("--min-span", type=float, default=0.4,
@@ -296,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         phi, band = (args.phi, None) if args.phi is not None else read_phi(args.phi_from)
         summary = analyse(args.outs, phi, args.start, args.tol, args.min_span, args.png,
-                          band)
+                          band, args.stop)
     except (InputError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
