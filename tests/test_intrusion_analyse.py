@@ -230,14 +230,15 @@ def test_stagnant_tiles_take_each_points_cell_on_uniform_and_graded_grids():
 
 
 def test_carried_depth_counts_down_the_column_to_the_first_slower_point():
-    """A column of 0.1 m tiles under a base at z = 1: shares 1, 0.9, 0.7, then 0.5 and
-    0.8 below; the zone moving with >= 0.6 of the intruder's velocity ends at the third
-    tile's lower face, 0.3 m below the base (the 0.8 under the slower point is not
-    counted). Points above the base and in the next column are not the column's; a
-    column whose first point is slower carries nothing."""
+    """A column of 0.1 m tiles under a base at z = 1 (and one slow point above it, not
+    counted): shares 1, 0.9, 0.7, then 0.5 and 0.8 below; the zone moving with >= 0.6
+    of the intruder's velocity ends at the third tile's lower face, 0.3 m below the
+    base (the 0.8 under the slower point is not counted). Points above the base and in
+    the next column are not the column's; a column whose first point is slower carries
+    nothing."""
     z = np.array([1.05, 0.95, 0.85, 0.75, 0.65, 0.55])
     x = np.column_stack([np.full(6, 0.05), np.zeros(6), z])
-    share = np.array([1.0, 1.0, 0.9, 0.7, 0.5, 0.8])
+    share = np.array([0.3, 1.0, 0.9, 0.7, 0.5, 0.8])  # the first is above the base
     other = np.array([[0.15, 0.0, 0.95], [0.15, 0.0, 0.85]])  # the next column, all carried
     x = np.vstack([x, other])
     share = np.concatenate([share, [1.0, 1.0]])
