@@ -267,3 +267,5 @@ def test_to_compares_runs_of_different_depths_over_the_same_span(tmp_path, capsy
         assert r["K_phi"] == pytest.approx(26.0, abs=4 * 0.1 / np.sqrt(0.11375))
     code, out, err = run_main(capsys, [deep, "--phi", 25.0, "--to", 0.05])
     assert code == 2 and "--to 0.05" in err and "need 4" in err
+    code, out, err = run_main(capsys, [deep, "--phi", 25.0, "--from", 0.7, "--to", 0.6])
+    assert code == 2 and "valid --from < --to" in err

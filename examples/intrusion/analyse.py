@@ -171,6 +171,8 @@ def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
 def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             tol: float = 0.002, min_span: float = 0.4, png: Path | None = None,
             phi_band: float | None = None, stop: float | None = None) -> dict:
+    if stop is not None and start is not None and start >= stop:
+        raise InputError(f"--from {start:g} and --to {stop:g}: valid --from < --to")
     runs = [load_run(o) for o in outs]
     if stop is not None:  # the rows beyond --to left out, before the rule and the fit
         for r in runs:
