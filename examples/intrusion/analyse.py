@@ -12,10 +12,10 @@ out. The label of a run is its folder name and, from case.resolved.toml, the int
 
 For each run, the steady regime p_u/(rho g R) = K_phi d/R + p_0 is fitted by least
 squares over d/R in [s, d_max], d_max the deepest row (or the deepest at d/R <= --to:
-runs that went to different depths compared over the same span). The window start s is, by default,
-chosen by a slope-stability rule: s is the smallest of 0, 0.05, 0.10, ... (in units of R)
-such that moving the start 0.1 R and 0.2 R deeper changes the fitted slope K(s) by less
-than
+runs that went to different depths compared over the same span). The window start s is,
+by default, chosen by a slope-stability rule: s is the smallest of 0, 0.05, 0.10, ...
+(in units of R) such that moving the start 0.1 R and 0.2 R deeper changes the fitted
+slope K(s) by less than
 
     max(tol K(s), 2 sqrt(sigma^2 (1/Sxx' - 1/Sxx)))
 

@@ -16,9 +16,9 @@ speed they move with along its direction (v . e / |v_rigid|, e its direction of 
 that part of the plane [m] (default: the grid). Depth and d/R come from history.csv.
 
 For each frame it also measures the zone carried with the intruder (`carried_depth`):
-how far below the base, next to the axis (0.05 R) and at 0.9 R, the points move with at least
-`--carried` (default 0.6) of its velocity, counted down from the base to the first point
-that does not. A stagnant cone reaches deeper on the axis than at the edge; a layer
+how far below the base, next to the axis (0.05 R) and at 0.9 R, the points move with
+at least `--carried` (default 0.6) of its velocity, counted down from the base to the
+first point that does not. A stagnant cone reaches deeper on the axis than at the edge; a layer
 pushed ahead of a smooth base is as deep at both. Prints the frames used and these
 depths; the last line is one JSON object.
 """
@@ -133,8 +133,9 @@ def main() -> None:
         value = share if args.field == "velocity" else np.asarray(fields["rotation_rate"]).ravel()
         near = x[:, 1] < first_y
         h = point_spacing(case, x[near])
-        data.append((x[near], h, value[near]))
-        bx, bz, w, _ = intruder_section(case, depth)
+        section = intruder_section(case, depth)
+        data.append((x[near], h, value[near], section))
+        bx, bz, w, _ = section
         half = w / 2  # the section spans the axis +- R (+- the half-width of a box)
         carried.append({where: carried_depth(x[near], h, share[near], bz, bx + half + frac * half,
                                              args.carried)
@@ -144,14 +145,15 @@ def main() -> None:
         vmax = 1.0
     lo, hi, _ = case.grid.extent()
     x0, x1, z0, z1 = args.box if args.box else (lo[0], hi[0], lo[2], hi[2])
-    for ax, (target, d, t, f, depth), (x, h, rate) in zip(axes[0], chosen, data, strict=True):
+    for ax, (target, d, t, f, _), (x, h, rate, section) in zip(axes[0], chosen, data,
+                                                               strict=True):
         tiles = PatchCollection([Rectangle((px - hx / 2, pz - hz / 2), hx, hz) for px, pz, hx, hz
                                  in zip(x[:, 0], x[:, 2], h[:, 0], h[:, 2], strict=True)],
                                 cmap="viridis", linewidth=0, antialiased=False)
         tiles.set_array(rate)
         tiles.set_clim(0.0, vmax)
         ax.add_collection(tiles)
-        bx, bz, w, ht = intruder_section(case, depth)
+        bx, bz, w, ht = section
         ax.add_patch(Rectangle((bx, bz), w, ht, fill=False, edgecolor="w", lw=1.2))
         ax.set(title=f"d/R = {d:.2f} (t = {t:.2f} s)", xlabel="x (m)", ylabel="z (m)",
                aspect="equal", xlim=(x0, x1), ylim=(z0, z1), facecolor="0.85")
