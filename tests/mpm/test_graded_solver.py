@@ -160,7 +160,7 @@ def test_a_wave_crossing_a_grading_passes_it_with_a_bounded_reflection():
     35 um, never across a cell.)"""
     fine = _bar_wave(np.arange(0.0, 2.0 + 1e-9, 0.02))
     step = _bar_wave(np.concatenate([np.arange(0.0, 1.0, 0.02), np.arange(1.0, 2.0 + 1e-9, 0.04)]))
-    from grainscale.mpm.rectilinear import graded_axis
+    from grainscale.mpm.grid import graded_axis
 
     graded = _bar_wave(graded_axis(0.0, 2.0, 0.0, 1.0, 0.02, 1.2, max_cell=0.04))
     assert 0.0 < fine < 5e-3, fine

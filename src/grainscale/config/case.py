@@ -35,7 +35,7 @@ FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is 
 
 
 class GradedAxisCfg(StrictModel):
-    """One axis of a rectilinear grid written concisely (mpm/rectilinear.graded_axis):
+    """One axis of a rectilinear grid written concisely (mpm/grid.graded_axis):
     cells of `cell` over `fine`, growing by `ratio` per cell away from it, up to
     `max_cell`, scaled to end exactly at lo and hi."""
     lo: float  # m, first node
@@ -46,7 +46,7 @@ class GradedAxisCfg(StrictModel):
     max_cell: Pos | None = None  # m, the largest cell (default: no limit)
 
     def nodes(self):
-        from grainscale.mpm.rectilinear import graded_axis
+        from grainscale.mpm.grid import graded_axis
 
         lo, hi = self.fine if self.fine is not None else (self.lo, self.hi)
         return graded_axis(self.lo, self.hi, lo, hi, self.cell, self.ratio, self.max_cell)
@@ -72,7 +72,7 @@ class GridCfg(StrictModel):
     def _nodes(cls, v, info):
         if v is None:
             return v
-        from grainscale.mpm.rectilinear import check_nodes
+        from grainscale.mpm.grid import check_nodes
 
         key = f"grid.{info.field_name}"
         try:

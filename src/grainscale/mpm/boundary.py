@@ -15,10 +15,12 @@
   nodal momentum after the force integration, so the friction impulse per step is
   mu times the normal impulse, as Coulomb's law asks.
 - Point tractions (Neumann): a traction vector t (Pa) on the material points selected by
-  a box; each carries the force t * A_p with the tributary area A_p = V0_p^(2/3) (the
-  face of its cubic sub-cell). The surface term of seed Eq. 6, int N_I t dS, is evaluated
-  at the point's surface position x_p + l_p n (n the outward normal of the loaded
-  surface) with linear weights, so the load reaches the nodes of the surface itself and
+  a box; each carries the force t * A_p with the tributary area A_p of its domain's
+  face across the surface's normal n: V0_p^(2/3) for a cubic sub-cell, V0_p / (2 l_n)
+  for a graded grid's box (so the points of a face add up to its area). The surface
+  term of seed Eq. 6, int N_I t dS, is evaluated at the point's surface position
+  x_p + l_p n (n the outward normal of the loaded surface) with linear weights, so the
+  load reaches the nodes of the surface itself and
   the outermost cell carries the full stress (mapping it from x_p instead leaves a
   quarter of it on the next node plane in). With area "current" (the default) the
   traction is a Cauchy traction on the deformed surface: the area follows Nanson's
@@ -191,13 +193,21 @@ class Traction:
 
 
 def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: str,
-                  **timing) -> Traction:
-    """Traction on the points whose centres lie in [lo, hi], on their `surface` side
-    ('x+', 'z-', ...); force = t * V0^(2/3) (times the Nanson area ratio if current)."""
+                  lp: np.ndarray | None = None, **timing) -> Traction:
+    """Traction t [Pa] on the points whose centres lie in [lo, hi], on their `surface`
+    side ('x+', 'z-', ...): force = t * A0, with A0 [m^2] the face of the point's domain
+    across the surface's normal n, V0 / (2 l_n) for a box of half-widths lp (P,3) (a
+    graded grid's sub-cell: the points of a face then add up to its area exactly), and
+    V0^(2/3) for a cube or lp None (the same area, in the digits uniform grids have
+    always used); times the Nanson area ratio if current."""
     sel = np.flatnonzero(np.all((x >= np.asarray(lo)) & (x <= np.asarray(hi)), axis=1))
-    area = np.cbrt(vol0[sel]) ** 2
-    force = area[:, None] * np.asarray(traction, dtype=np.float64)[None, :]
     axis, side = FACES[surface]
+    area = np.cbrt(vol0[sel]) ** 2
+    if lp is not None:
+        l = np.asarray(lp)[sel]
+        box = (l[:, 0] != l[:, 1]) | (l[:, 1] != l[:, 2])
+        area[box] = vol0[sel][box] / (2.0 * l[box, axis])
+    force = area[:, None] * np.asarray(traction, dtype=np.float64)[None, :]
     normal = np.zeros(3)
     normal[axis] = 1.0 if side else -1.0
     return Traction(sel.astype(np.int64), force, normal, **timing)

@@ -119,6 +119,8 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
         mcfg = case.materials[body.material]
         if grid.axes is not None and body.shape != "file":  # box-shaped sub-cells
             lp = sub_cell_half_widths(grid, x, body.points_per_cell)
+        elif grid.axes is not None:  # a cube of the point's volume, within its own cell
+            lp = np.minimum(0.5 * np.cbrt(vol)[:, None], sub_cell_half_widths(grid, x, 1))
         else:
             lp = np.minimum(0.5 * np.cbrt(vol), 0.5 * grid.cell_size.min())
         sets.append(make_points(x, vol, mcfg.density, names.index(body.material),
@@ -167,7 +169,7 @@ def build_state(case: Case, case_dir: Path | str = ".", n_threads: int = 1,
     n_loaded = 0
     for i, t in enumerate(case.tractions):
         tr = boundary.make_traction(everything.x, everything.vol0, t.lo, t.hi, t.traction,
-                                    t.surface,
+                                    t.surface, lp=everything.lp,
                                     ramp_time=t.ramp_time,
                                     start_time=t0 if t.start_time is None else t.start_time,
                                     end_time=np.inf if t.end_time is None else t.end_time,

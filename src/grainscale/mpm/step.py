@@ -17,7 +17,7 @@ import numpy as np
 
 from grainscale.config.case import FLIP_DEFAULT, DampingCfg, SolverCfg
 from grainscale.distributed.comm import Comm
-from grainscale.mpm import boundary
+from grainscale.mpm import boundary, rectilinear
 from grainscale.mpm.fluidity import advance_fluidity
 from grainscale.mpm.grid import Grid
 from grainscale.mpm.points import Points
@@ -83,19 +83,20 @@ class MPMState:
                              f"{VELOCITY_UPDATES}")
         P = self.points.n
         self.n_global = self.comm.total(P)  # points over all ranks
-        self.ns = stencil_width(self.shape)
-        slots = 3  # the uniform kernels fill 3 slots per axis, linear hats too
-        if self.grid.axes is not None:  # rectilinear: from the widest point domain
-            from grainscale.mpm.rectilinear import stencil
-
-            local = self.points.lp.max(axis=0) if P else np.zeros(3)
-            lp_max = np.asarray(self.comm.max([float(v) for v in local]))  # per axis
-            self.ns = slots = stencil(self.grid.axes, lp_max, self.shape == GIMP)
+        # the uniform kernels fill 3 slots per axis, linear hats too; a rectilinear grid's
+        # stencil is sized per axis every step (shape_functions)
+        self.ns = np.full(3, stencil_width(self.shape), dtype=np.int64)
         self.transfer = Transfer(self.grid.n_nodes, P, self.n_threads, self.comm, self.n_global,
                                  fold=self.grid.fold if self.grid.periodic.any() else None)
         self.dH = np.zeros((P, 3, 3))
-        self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, slots)),
-                          np.zeros((P, 3, slots)))
+        self.shape_buf = (np.zeros((P, 3), dtype=np.int64), np.zeros((P, 3, 3)),
+                          np.zeros((P, 3, 3)))
+        reach = self.grid.reach()
+        if P and np.any(self.points.lp.max(axis=0) >= reach):
+            a = int(np.argmax(self.points.lp.max(axis=0) - reach))
+            raise ValueError(f"lp: a point's half-width on axis {'xyz'[a]} "
+                             f"({self.points.lp[:, a].max():.6g} m) reaches past the periodic "
+                             f"padding; valid: below {reach[a]:.6g} m (the padding's width)")
         self.fext = np.zeros((P, 3))  # N, point forces (none yet: loads act on nodes)
         vmax = float(np.sqrt((self.points.v**2).sum(axis=1).max())) if P else 0.0
         mmax = float(self.points.m.max()) if P else 0.0
@@ -103,9 +104,16 @@ class MPMState:
         self.chunk_vmax = np.zeros_like(self.transfer.chunk_max)
         self.chunk_out = np.zeros_like(self.transfer.chunk_count)
         self.m_point_max = mmax
-        # the mass of "a point" beside each node: the heaviest point's, scaled by the
-        # node's share of space on a graded grid (a fine cell's points are lighter)
-        self.m_point_ref = mmax * self.grid.node_volume_ratio
+        # the mass of "a point" beside each node: the heaviest point's on a uniform grid;
+        # on a graded one, the mass per cell volume of the points (m_p over the volume
+        # of the cell each was made in, x0: it does not change as points move) times
+        # the largest cell beside the node, the mass of a point made there
+        if self.grid.axes is None:
+            self.m_point_ref = mmax
+        else:
+            ratio = (float((self.points.m / self.grid.cell_volume_at(self.points.x0)).max())
+                     if P else 0.0)
+            self.m_point_ref = float(self.comm.max([ratio])[0]) * self.grid.node_volume
         self.mass_tol = MASS_TOL * self.m_point_ref
         self.contact_loads = None
         lp_min = float(self.points.lp.min()) if P else np.inf
@@ -137,7 +145,21 @@ class MPMState:
 # ------------------------------------------------------------------------- stages
 def shape_functions(s: MPMState) -> None:
     """S_Ip and grad S_Ip at the current point positions."""
-    s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape, out=s.shape_buf)
+    if s.grid.axes is None:
+        s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape,
+                                     out=s.shape_buf)
+        return
+    gimp = s.shape == GIMP
+    ns = rectilinear.stencil(s.points.x, s.points.lp, s.grid.axes, gimp)
+    if s.comm.size > 1:  # one width on every rank: the kernels' loops are then alike
+        ns = np.asarray(s.comm.max([float(n) for n in ns]), dtype=np.int64)
+    if ns.max() > s.shape_buf[1].shape[2]:  # grown, never shrunk: no allocation per step
+        P = s.points.n
+        s.shape_buf = (s.shape_buf[0], np.zeros((P, 3, int(ns.max()))),
+                       np.zeros((P, 3, int(ns.max()))))
+    s.ns = ns
+    s.base, s.w, s.dw = rectilinear.evaluate(s.points.x, s.points.lp, s.grid.axes, gimp,
+                                             out=s.shape_buf, ns=ns)
     if s.scheme == "MUSL" and s.velocity_update != "flip":
         s.x_start = s.points.x.copy()  # the remap's affine term is taken where S_Ip was
 

@@ -29,6 +29,12 @@ from grainscale.mpm.points import half_widths
 HEADROOM = 62  # bits available to a nodal sum (int64 has 63 plus sign)
 
 
+def stencil_counts(ns) -> np.ndarray:
+    """The stencil's node counts per axis (3,) int64 from one count for all axes or
+    three: the kernels visit ns[0] x ns[1] x ns[2] nodes from each point's base."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(ns, dtype=np.int64), (3,)))
+
+
 def fixed_point_scale(bound: float) -> float:
     """Largest power of two s with bound * s <= 2^62 (1 when bound is 0)."""
     if not bound > 0.0 or not math.isfinite(bound):
@@ -42,16 +48,16 @@ def fixed_point_scale(bound: float) -> float:
 @njit(cache=True, fastmath=True, inline="always")
 def _p2g_mm_point(p, m, v, C, x, origin, h, base, w, nx, ny, ns, mscale, pscale, b):
     mp = m[p]
-    for k in range(ns):
+    for k in range(ns[2]):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
         dz = origin[2] + iz * h[2] - x[p, 2]
-        for j in range(ns):
+        for j in range(ns[1]):
             iy = base[p, 1] + j
             row = nx * (iy + ny * iz) + base[p, 0]
             wyz = w[p, 1, j] * wz
             dy = origin[1] + iy * h[1] - x[p, 1]
-            for i in range(ns):
+            for i in range(ns[0]):
                 I = row + i
                 dx = origin[0] + (base[p, 0] + i) * h[0] - x[p, 0]
                 sm = w[p, 0, i] * wyz * mp
@@ -69,16 +75,16 @@ def _p2g_mm_point(p, m, v, C, x, origin, h, base, w, nx, ny, ns, mscale, pscale,
 def _p2g_mm_point_rect(p, m, v, C, x, X, base, w, nx, ny, ns, mscale, pscale, b):
     """_p2g_mm_point on a rectilinear grid: node (i, j, k) at (X[0, i], X[1, j], X[2, k])."""
     mp = m[p]
-    for k in range(ns):
+    for k in range(ns[2]):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
         dz = X[2, iz] - x[p, 2]
-        for j in range(ns):
+        for j in range(ns[1]):
             iy = base[p, 1] + j
             row = nx * (iy + ny * iz) + base[p, 0]
             wyz = w[p, 1, j] * wz
             dy = X[1, iy] - x[p, 1]
-            for i in range(ns):
+            for i in range(ns[0]):
                 I = row + i
                 dx = X[0, base[p, 0] + i] - x[p, 0]
                 sm = w[p, 0, i] * wyz * mp
@@ -117,6 +123,7 @@ def p2g_mass_momentum_kernel(m, v, C, x, origin, h, base, w, nodes, ns, mscale, 
     """Scatter S_Ip m_p and S_Ip m_p (v_p + C_p (x_I - x_p)) into buf[t, I, 0:4] (fixed
     point): seed Eq. 16, with the affine term of APIC (Jiang et al. 2015, Eq. 11); C = 0
     is the FLIP/PIC transfer."""
+    ns = stencil_counts(ns)
     parallel_for(_p2g_mm_task, m, v, C, x, origin, h, base, w, nodes, ns, mscale, pscale, buf,
                  nt=buf.shape[0])
 
@@ -156,15 +163,15 @@ def _p2g_force_point(p, m, vol, stress, fext, gravity, base, w, dw, nx, ny, ns, 
     ex = m[p] * gravity[0] + fext[p, 0]
     ey = m[p] * gravity[1] + fext[p, 1]
     ez = m[p] * gravity[2] + fext[p, 2]
-    for k in range(ns):
+    for k in range(ns[2]):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
         gz = dw[p, 2, k]
-        for j in range(ns):
+        for j in range(ns[1]):
             wy = w[p, 1, j]
             gy = dw[p, 1, j]
             row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
-            for i in range(ns):
+            for i in range(ns[0]):
                 I = row + i
                 wx = w[p, 0, i]
                 S = wx * wy * wz
@@ -195,6 +202,7 @@ def p2g_force_kernel(m, vol, stress, fext, gravity, base, w, dw, nodes, ns, fsca
 
     Internal force seed Eq. 5, external force (gravity and point forces) seed Eq. 6.
     """
+    ns = stencil_counts(ns)
     parallel_for(_p2g_force_task, m, vol, stress, fext, gravity, base, w, dw, nodes, ns,
                  fscale, buf, nt=buf.shape[0])
 
@@ -203,15 +211,15 @@ def p2g_force_kernel(m, vol, stress, fext, gravity, base, w, dw, nodes, ns, fsca
 def _vgrad_point(p, vgrid, base, w, dw, nx, ny, ns, dt, dH, F, vol0, vol):
     # scalar accumulators stay in registers
     g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
-    for k in range(ns):
+    for k in range(ns[2]):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
         gz = dw[p, 2, k]
-        for j in range(ns):
+        for j in range(ns[1]):
             wy = w[p, 1, j]
             gy = dw[p, 1, j]
             row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
-            for i in range(ns):
+            for i in range(ns[0]):
                 I = row + i
                 wx = w[p, 0, i]
                 dx = dw[p, 0, i] * wy * wz
@@ -265,6 +273,7 @@ def velocity_gradient_kernel(vgrid, base, w, dw, nodes, ns, dt, dH, F, vol0, vol
 
     Index convention: dH[p, a, b] = d(Delta u_a) / d x_b.
     """
+    ns = stencil_counts(ns)
     parallel_for(_vgrad_task, vgrid, base, w, dw, nodes, ns, dt, dH, F, vol0, vol)
 
 
@@ -277,15 +286,15 @@ def _gradient_task(t, nt, field, base, w, dw, nodes, ns, out):
             for a in range(3):
                 for b in range(3):
                     out[p, a, b] = 0.0
-            for k in range(ns):
+            for k in range(ns[2]):
                 iz = base[p, 2] + k
                 wz = w[p, 2, k]
                 gz = dw[p, 2, k]
-                for j in range(ns):
+                for j in range(ns[1]):
                     wy = w[p, 1, j]
                     gy = dw[p, 1, j]
                     row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
-                    for i in range(ns):
+                    for i in range(ns[0]):
                         wx = w[p, 0, i]
                         dx = dw[p, 0, i] * wy * wz
                         dy = wx * gy * wz
@@ -300,6 +309,7 @@ def _gradient_task(t, nt, field, base, w, dw, nodes, ns, out):
 def gradient_kernel(field, base, w, dw, nodes, ns, out):
     """out[p, a, b] = sum_I field[I, a] dS_Ip/dx_b: the gradient at the points of a nodal
     field (n_nodes, 3), in its units per m."""
+    ns = stencil_counts(ns)
     parallel_for(_gradient_task, field, base, w, dw, nodes, ns, out)
 
 
@@ -310,19 +320,20 @@ def _interpolate_task(t, nt, field, base, w, nodes, ns, out):
     for c in range(t, (P + CHUNK - 1) // CHUNK, nt):
         for p in range(c * CHUNK, min(P, (c + 1) * CHUNK)):
             acc = 0.0
-            for k in range(ns):
+            for k in range(ns[2]):
                 iz = base[p, 2] + k
                 wz = w[p, 2, k]
-                for j in range(ns):
+                for j in range(ns[1]):
                     wyz = w[p, 1, j] * wz
                     row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
-                    for i in range(ns):
+                    for i in range(ns[0]):
                         acc += field[row + i] * w[p, 0, i] * wyz
             out[p] = acc
 
 
 def interpolate_kernel(field, base, w, nodes, ns, out):
     """out[p] = sum_I S_Ip field[I]: a nodal scalar (n_nodes,) at the points (P,)."""
+    ns = stencil_counts(ns)
     parallel_for(_interpolate_task, field, base, w, nodes, ns, out)
 
 
@@ -330,16 +341,16 @@ def interpolate_kernel(field, base, w, nodes, ns, out):
 def _g2p_point(p, vold, vnew, vaff, base, w, dw, nx, ny, ns, dt, flip, apic, lo, hi, x, v, C):
     ax = ay = az = ux = uy = uz = 0.0
     c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
-    for k in range(ns):
+    for k in range(ns[2]):
         iz = base[p, 2] + k
         wz = w[p, 2, k]
         gz = dw[p, 2, k]
-        for j in range(ns):
+        for j in range(ns[1]):
             wy = w[p, 1, j]
             gy = dw[p, 1, j]
             wyz = wy * wz
             row = nx * (base[p, 1] + j + ny * iz) + base[p, 0]
-            for i in range(ns):
+            for i in range(ns[0]):
                 I = row + i
                 wx = w[p, 0, i]
                 S = wx * wyz
@@ -426,6 +437,7 @@ def g2p_kernel(vold, vnew, vaff, base, w, dw, nodes, ns, dt, flip, apic, lo, hi,
     Per chunk: the largest point speed (for the CFL check) and the number of points
     whose centre left the grid box [lo, hi].
     """
+    ns = stencil_counts(ns)
     parallel_for(_g2p_task, vold, vnew, vaff, base, w, dw, nodes, ns, dt, flip, apic, lo, hi, x, v,
                  C, vmax_out, nout_out)
 
@@ -474,13 +486,15 @@ def mark_covered_nodes_rectilinear(x, lp, axes, mark) -> None:
     _mark_boxes(lo, hi, len(axes[0]), len(axes[1]), mark)
 
 
-def stencil_box(base: np.ndarray, ns: int) -> np.ndarray:
+def stencil_box(base: np.ndarray, ns) -> np.ndarray:
     """(6,) float: minus the lowest and the highest-plus-one node index per axis touched
-    by the stencils starting at base (P,3); "minus" so that one MAX reduction gives the
-    union of the ranks' boxes. An empty set gives an empty box."""
+    by the stencils of ns nodes (one count or one per axis) starting at base (P,3);
+    "minus" so that one MAX reduction gives the union of the ranks' boxes. An empty set
+    gives an empty box."""
     if base.shape[0] == 0:
         return np.full(6, -np.inf)
-    return np.concatenate([-base.min(axis=0), base.max(axis=0) + ns]).astype(np.float64)
+    return np.concatenate([-base.min(axis=0),
+                           base.max(axis=0) + stencil_counts(ns)]).astype(np.float64)
 
 
 def box_view(a: np.ndarray, nodes: np.ndarray, box: np.ndarray) -> np.ndarray:
@@ -549,6 +563,7 @@ class Transfer:
         pscale = fixed_point_scale(self.n_global * g[0] * vbound)
         nodes = grid.nodes
         if P and grid.axes is not None:  # rectilinear: node positions from the table
+            ns = stencil_counts(ns)
             parallel_for(_p2g_mm_rect_task, m, v, C, x, grid.node_table, base, w, nodes, ns, mscale,
                          pscale, self.buf4, nt=self.buf4.shape[0])
             np.sum(self.buf4, axis=0, out=self.sum4)
