@@ -280,3 +280,27 @@ def test_points_read_from_a_file_get_half_widths_from_their_own_cell(tmp_path):
     s = build_state(_case(tmp_path, GRADED, rest), tmp_path)
     np.testing.assert_allclose(s.points.lp, [[0.05, 0.05, 0.05], [0.05, 0.05, 0.025]],
                                rtol=1e-12)
+
+
+def test_a_nodes_mass_threshold_is_a_point_of_its_own_cells():
+    """The mass of "a point" beside a node (MPMState.m_point_ref, which the active-node,
+    light-node and contact-zone thresholds are fractions of) is that of a point made in
+    the largest cell beside the node, wherever the grid's largest cells are: a body 2
+    points a cell in 0.1 m cells under empty cells growing to 0.4 m gives its nodes the
+    mass of its own points (dividing by the grid's largest cell made it 1/4 of it) and a
+    node beside a 0.2 m cell twice that (the cell is twice as tall)."""
+    from grainscale.mpm.grid import Grid
+    from grainscale.mpm.materials import LinearElastic
+    from grainscale.mpm.points import fill_box, make_points, sub_cell_half_widths
+    from grainscale.mpm.step import MPMState
+
+    xy = [0.0, 0.1, 0.2]
+    grid = Grid.rectilinear([xy, xy, [0.0, 0.1, 0.2, 0.4, 0.8]])
+    x, vol = fill_box(grid, [0, 0, 0], [0.2, 0.2, 0.2], 2)
+    pts = make_points(x, vol, 1000.0, 0, lp=sub_cell_half_widths(grid, x, 2))
+    mat = LinearElastic("m", pts.n, density=1000.0, youngs_modulus=1e6, poisson_ratio=0.3)
+    s = MPMState(grid=grid, points=pts, materials=[mat], mat_points=[None])
+    ref = s.m_point_ref.reshape(5, 3, 3)  # [k, j, i]
+    m = 1000.0 * 0.05**3
+    np.testing.assert_allclose(ref[1], m, rtol=1e-12)  # z = 0.1: cells of 0.1 m around
+    np.testing.assert_allclose(ref[2], 2 * m, rtol=1e-12)  # z = 0.2: a 0.2 m cell above

@@ -299,3 +299,22 @@ def test_flat_punch_on_elastic_half_space_gives_boussinesq_stiffness():
     assert abs(a_eff / fp.RADIUS - 1.0) < 0.1  # the disc is resolved
     ratio = fp.extrapolate(rows) / fp.boussinesq(a_eff)
     assert abs(ratio - 1.0) < 0.05, ratio
+
+
+def test_the_penalty_stiffness_is_fixed_at_the_runs_first_step():
+    """c_ref, the wave speed the penalty springs are scaled by, is taken at the run's
+    first step, before the plate (0.1 m above the block, still) touches anything, and
+    kept after the material's stiffness changes: what mpm/rigid.py and docs/mpm.md say."""
+    from grainscale.mpm.step import step
+
+    h = 0.05
+    grid = Grid.make([0, 0, 0], h, [4, 4, 8])
+    s = elastic_box(grid, [0, 0, 0], [0.2, 0.2, 0.2], n=2)
+    s.rigid = _penalty_plate([-0.1, -0.1, 0.3], [0.3, 0.3, 0.35], [0, 0, 0], 0.0)
+    c0 = s.wave_speed()
+    step(s, s.stable_dt())
+    assert s.rigid.in_contact == 0 and s.rigid.wave_speed_ref == c0 > 0.0
+    s.materials[0].E *= 4.0  # a stiffer material later: c_ref stays
+    assert s.wave_speed() == pytest.approx(2.0 * c0)
+    step(s, s.stable_dt())
+    assert s.rigid.wave_speed_ref == c0

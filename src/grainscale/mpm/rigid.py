@@ -16,8 +16,9 @@ never pulling (f_n >= 0), plus Coulomb friction against the relative tangential 
 v_t, f_t = -min(mu f_n, m_p |v_t| / dt) v_t/|v_t| (at most the force that stops the
 slip in one step). k_p is the point's own P-wave stiffness times kappa: a column of
 material of the point's size, M (2 l_p)^2 / (2 l_p) with M = rho c_ref^2, c_ref the
-largest wave speed when the contact first acts. Its period 4 pi l_p / (sqrt(kappa) c_ref)
-bounds the time step (critical_dt). The force of the material on the body is minus the
+largest wave speed at the run's first step (in the intrusion cases the geostatic
+stage's start), kept in checkpoints. Its period 4 pi l_p / (sqrt(kappa) c_ref) bounds
+the time step (critical_dt). The force of the material on the body is minus the
 sum of the contact forces. The contact surface is the body's own and one-sided, with or
 without friction; the reaction still ripples as the material around the body crosses
 cells (docs/mpm.md: rigid body).
@@ -209,7 +210,7 @@ class RigidBody:
     penalty: float = 1.0  # kappa
     damping_ratio: float = 0.0  # zeta
     friction: float = 0.0  # mu of the body's surface
-    wave_speed_ref: float = 0.0  # m/s, c_ref; 0 until the contact first acts
+    wave_speed_ref: float = 0.0  # m/s, c_ref; 0 until the run's first step sets it
     displacement: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m
     force: np.ndarray = field(default_factory=lambda: np.zeros(3))  # N, material on body
     in_contact: int = 0  # points in penalty contact in the last step

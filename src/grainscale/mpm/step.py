@@ -251,7 +251,7 @@ def rigid_penalty(s: MPMState, dt: float) -> None:
     s.contact_loads = None
     if body is None or body.contact != "penalty":
         return
-    if body.wave_speed_ref <= 0.0:  # the stiffness is fixed when the contact first acts
+    if body.wave_speed_ref <= 0.0:  # the stiffness is fixed at the run's first step
         body.wave_speed_ref = s.wave_speed()
     pts = s.points
     _, force, where = body.penalty_forces(pts.x, pts.v, pts.m, pts.lp, s.time, dt)
