@@ -1,5 +1,7 @@
 """What an RVE hands to the MPM after an increment: the stress of the state it reached,
-and moduli that bound its stiffness (kernel.py, item 8).
+and moduli that bound its stiffness along the cell axes (kernel.py, item 8; the wave
+speed the CFL step reads from them is an estimate over directions,
+tests/coupling/test_wave_speed.py).
 
 The stress is checked against the independent plain-numpy reference of
 test_reference.py (all pairs by brute force over the 27 images, the contact law written
@@ -78,11 +80,12 @@ def test_returned_stress_is_that_of_the_returned_state(packing, nsteps):
 
 
 def test_one_step_modulus_is_bounded_by_the_one_the_time_step_uses():
-    """The largest modulus an RVE can show the MPM is that of an increment taken in one DEM
-    step, before any grain moves relative to the affine field: the affine modulus of the
-    whole contact law, kn and kt, which `stiffness` holds and the CFL step reads
-    (RVEMaterial.wave_speed). Measured per axis as the difference between a strained and
-    an unstrained copy (the packing's own out-of-balance motion cancels)."""
+    """The largest axial modulus an RVE can show the MPM is that of an increment taken in
+    one DEM step, before any grain moves relative to the affine field: the affine modulus
+    of the whole contact law, kn and kt, along that axis, which `stiffness` holds and the
+    CFL step reads (RVEMaterial.wave_speed; other directions: test_wave_speed.py).
+    Measured per axis as the difference between a strained and an unstrained copy (the
+    packing's own out-of-balance motion cancels)."""
     h, centres, radii = read_packing(DATA / "packing.txt")
     params = SMALL_PARAMS.model_copy(update={"damping": 0.0})  # elastic contacts
     cp = contact_params(params)
