@@ -29,9 +29,11 @@ from grainscale.analysis import read_columns  # noqa: E402
 from grainscale.cli import main as grainscale  # noqa: E402
 from grainscale.dem import cuda_kernel, engine  # noqa: E402
 from grainscale.dem.device_batch import DeviceBatch  # noqa: E402
+from grainscale.dem.retile import double_cell, widths  # noqa: E402
 from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_packing  # noqa: E402
 
 THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
+MAX_BLOCKS = cuda_kernel.MAX_BLOCKS  # restored after section 10
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 # The coupled runs' RVE: the fewest spheres a cell of 8 r_max holds at porosity 0.38
 SHEAR_STEPS = np.array([30, 40])  # per RVE: both rebuild their lists on the way
@@ -235,9 +237,75 @@ def resident_against_per_call(base: RVEBatch, p: engine.ContactParams, dt: float
             "device_bytes_per_particle": dev.device_bytes() / (base.n_rve * base.n_particles)}
 
 
+def alternating_shapes(base: RVEBatch, p: engine.ContactParams, dt: float) -> dict:
+    """Two groups as a retiled material holds them, base's 2 RVEs of 24 spheres and RVE
+    0 doubled (48 spheres), resident and updated in turn (2 DEM steps, twice each): the
+    scratch shapes launched in order, how many scratch allocations they made, and whether
+    the states equal bitwise those of the same updates with the scratch freed before
+    every launch (fresh arrays, as a single cached shape gave)."""
+    big = double_cell(base, 0, int(np.argmin(widths(base.h[:1])[0])))
+    real = cuda_kernel.launch
+    runs = {}
+    for fresh in (False, True):
+        groups = [DeviceBatch(base.copy()), DeviceBatch(big.copy())]
+        launched = []
+
+        def recording(*args, fresh=fresh, launched=launched, **kw):
+            if fresh:
+                cuda_kernel._SCRATCH.clear()
+            launched.append(real(*args, **kw))
+            return launched[-1]
+
+        cuda_kernel.launch = recording
+        try:
+            for _ in range(2):
+                for dev in groups:
+                    engine.advance(dev, 2, dt, p, engine.rate_control(dev.n_rve))
+        finally:
+            cuda_kernel.launch = real
+        runs[fresh] = [dev.pull() for dev in groups], launched
+    (kept, launched), (freed, _) = runs[False], runs[True]
+    return {"shapes": [list(a[0].shape[:3]) for a in launched],
+            "allocations": len({id(x) for a in launched for x in a}) // 9,
+            "same_state": all(np.array_equal(getattr(x, f), getattr(y, f))
+                              for x, y in zip(kept, freed, strict=True) for f in STATE_FIELDS)}
+
+
+def more_rves_than_blocks(base: RVEBatch, p: engine.ContactParams, dt: float) -> dict:
+    """Three RVEs of different states (base's two and a third packing) with lists up to
+    date, sheared under a servo by 6, 4 and 5 steps on 1 and on 2 blocks (block g runs
+    RVEs g, g + B, ...: one block's scratch serves several RVEs): compared with the CPU,
+    and whether the state equals bitwise that of 3 blocks (one RVE each)."""
+    third, _, _ = agitated_dense_state(n=24, seed=7)
+    start = concatenate([base, third])
+    ctrl = engine.rate_control(3, l_ctrl=[[0.0, 400.0, 0.0], [0.0, 0.0, 0.0],
+                                          [0.0, 0.0, -20.0]], servo={0: -50e3},
+                               max_rate=50.0)
+    nsteps = np.array([6, 4, 5])
+    cpu = start.copy()
+    engine.advance(cpu, nsteps, dt, p, ctrl)
+    res = {"lists_up_to_date": bool(not start.need_rebuild.any())}
+    gpu = {}
+    for blocks in (3, 1, 2):
+        gpu[blocks] = start.copy()
+        cuda_kernel.MAX_BLOCKS = blocks
+        try:
+            engine.advance(gpu[blocks], nsteps, dt, p, ctrl, device="cuda")
+        finally:
+            cuda_kernel.MAX_BLOCKS = MAX_BLOCKS
+        res[str(blocks)] = compare(cpu, gpu[blocks])
+        # STATE_FIELDS leave out force and torque (advance_batch copies them back only
+        # where every RVE has a block of its own)
+        res[str(blocks)]["same_as_3"] = all(
+            np.array_equal(getattr(gpu[3], f), getattr(gpu[blocks], f))
+            for f in STATE_FIELDS)
+    return res
+
+
 def main(parts: list[str]) -> None:
-    """parts: "kernel" (sections 1, 2 and 7: shear through rebuilds, capacity overflow,
-    the resident path; tiny batches, the fast tier), "kernel_more" (sections 3-6:
+    """parts: "kernel" (sections 1, 2, 7, 9 and 10: shear through rebuilds, capacity
+    overflow, the resident path, scratch kept per shape, more RVEs than blocks; tiny
+    batches, the fast tier), "kernel_more" (sections 3-6:
     momentum, damping and idle threads, reverse-list overflow, spread radii) and/or
     "coupled" (section 8, the `grainscale run` cases, minutes on the simulator)."""
     t0 = time.perf_counter()
@@ -251,7 +319,7 @@ def main(parts: list[str]) -> None:
 
 
 def kernel_cases(parts: list[str], res: dict) -> None:
-    """Sections 1-7 (those of `parts`) into res."""
+    """Sections 1-7, 9 and 10 (those of `parts`) into res."""
     block_size(THREADS)
     a, p, dt = agitated_dense_state(n=24, seed=3)
     b, _, _ = agitated_dense_state(n=24, seed=5)
@@ -274,7 +342,7 @@ def kernel_cases(parts: list[str], res: dict) -> None:
 
 
 def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
-    """Sections 1, 2 and 7."""
+    """Sections 1, 2, 7, 9 and 10."""
     # 1. shear with a normal-stress servo through list rebuilds, per-RVE step counts
     cpu, gpu = base.copy(), base.copy()
     engine.advance(cpu, SHEAR_STEPS, dt, p, ctrl)
@@ -295,6 +363,16 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
     # on the same data, so bitwise; then the same with a capacity overflow to regrow
     res["resident"] = resident_against_per_call(base, p, dt)
     res["resident_overflow"] = resident_against_per_call(small, p, dt)
+
+    # 9. groups of two sphere counts updated in turn keep one scratch each
+    t0 = time.perf_counter()
+    res["alternating"] = alternating_shapes(base, p, dt)
+    res["alternating"]["seconds"] = time.perf_counter() - t0
+
+    # 10. a block's scratch reused by the RVEs it runs one after another
+    t0 = time.perf_counter()
+    res["blocks"] = more_rves_than_blocks(base, p, dt)
+    res["blocks"]["seconds"] = time.perf_counter() - t0
 
 
 def more_cases(base, p, dt, ctrl, still, res) -> None:

@@ -4,13 +4,13 @@ device.
 
 The kernel runs in a subprocess with NUMBA_ENABLE_CUDASIM=1 (cuda_sim_cases.py): the
 variable is read when numba is imported, and must not leak into this process, whose
-other tests use the compiled CPU kernels. Tiny batches (2 RVEs of 24 spheres, 10-40
-steps): shear through list rebuilds, capacity overflow and the resident path in the
-fast tier, the other kernel cases with shrunk coupled runs (one or two RVEs of 90
-spheres, 5-10 MPM steps) in the validation tier (minutes: the simulator runs each GPU
-thread as a Python thread). The same cases run once more without the simulator when a subprocess can
-launch a CUDA kernel (skipped otherwise, as on machines without a GPU; on an H100 all
-pass, docs/performance.md).
+other tests use the compiled CPU kernels. Tiny batches (2-3 RVEs of 24 spheres, 4-40
+steps): shear through list rebuilds, capacity overflow, the resident path, scratch kept
+per shape and blocks running several RVEs in the fast tier, the other kernel cases with
+shrunk coupled runs (one or two RVEs of 90 spheres, 5-10 MPM steps) in the validation
+tier (minutes: the simulator runs each GPU thread as a Python thread). The same cases
+run once more without the simulator when a subprocess can launch a CUDA kernel (skipped
+otherwise, as on machines without a GPU; on an H100 all pass, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -228,6 +228,52 @@ def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
     if case == "resident_overflow":
         assert start == 3 and resident > start
     assert res["bytes_per_rve_call"] <= 1024
+
+
+def test_groups_of_two_sizes_updated_in_turn_keep_their_scratch(sim):
+    """A retiled material's groups (24 and 48 spheres here) are launched in turn every
+    update: each shape's scratch is allocated once and reused, and the states equal
+    bitwise those of the same updates with fresh scratch at every launch."""
+    res = sim["alternating"]
+    assert res["shapes"] == [[2, 24, 16], [1, 48, 16]] * 2
+    assert res["allocations"] == 2
+    assert res["same_state"]
+
+
+def test_scratch_keeps_the_shapes_used_last(monkeypatch):
+    """_scratch holds SCRATCH_SHAPES shapes and frees the least recently used first
+    (host arrays stand in for the device's: no GPU needed)."""
+    cuda_kernel = pytest.importorskip("grainscale.dem.cuda_kernel")
+    made = []
+    monkeypatch.setattr(cuda_kernel, "cuda", types.SimpleNamespace(
+        device_array=lambda shape, dtype: made.append(shape) or np.empty(shape, dtype)))
+    monkeypatch.setattr(cuda_kernel, "_SCRATCH", {})
+    monkeypatch.setattr(cuda_kernel, "SCRATCH_SHAPES", 2)
+    a = cuda_kernel._scratch(2, 24, 16)
+    b = cuda_kernel._scratch(1, 48, 16)
+    assert cuda_kernel._scratch(2, 24, 16) is a and len(made) == 18  # nine arrays a shape
+    c = cuda_kernel._scratch(1, 48, 20)  # frees (1, 48, 16), used longest ago
+    assert list(cuda_kernel._SCRATCH) == [(2, 24, 16), (1, 48, 20)]
+    assert cuda_kernel._scratch(2, 24, 16) is a and cuda_kernel._scratch(1, 48, 20) is c
+    assert cuda_kernel._scratch(1, 48, 16) is not b and len(made) == 36
+    assert a[0].shape == (2, 24, 16, 6) and a[1].shape == (2, 24, 32)
+
+
+@pytest.mark.parametrize("blocks", ["1", "2"])
+def test_a_block_running_several_rves_agrees_with_cpu(sim, blocks):
+    """3 RVEs of different packings on 1 or 2 blocks: a block's scratch (the reverse
+    list kept between steps, above all) serves RVE g, then g + B. Lists are up to date
+    at the start, so an RVE that took over its predecessor's reverse list instead of
+    making its own would show here. Force and torque, the scratch of the block's last
+    RVE, are not copied back when RVEs outnumber blocks (advance_batch)."""
+    res = sim["blocks"]
+    assert res["lists_up_to_date"]
+    res = res[blocks]
+    assert res["same_as_3"]  # bitwise the state of one block per RVE
+    assert res["same_counts"] and res["same_pairs"]
+    for name in ARRAYS:
+        if name not in ("force", "torque"):
+            assert res[name] < RTOL, (name, res[name])
 
 
 @pytest.mark.validation

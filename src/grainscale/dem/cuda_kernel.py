@@ -73,7 +73,8 @@ THREADS = 128  # block size (threads per RVE) of calls that name none; may be se
 # which allows 2 blocks of 128 threads per SM). 128 allows 4 and was 1.11x faster on
 # 10,000 RVEs of 800 spheres; 80 spills and was 1.4x slower (docs/performance.md)
 MAX_REGISTERS = 128
-MAX_BLOCKS = 1024  # blocks (RVEs in flight); the scratch is per block
+MAX_BLOCKS = 1024  # blocks (RVEs in flight) of calls that name none; the scratch is per
+# block; may be set
 NRED = 17  # partial sums reduced per block: contacts, sum f_n, 9 stress, 6 stiffness
 # status codes as plain ints (compile-time constants of the device code)
 OK, OVERFLOW, TOO_THIN, NOT_FINITE = (int(Status.OK), int(Status.OVERFLOW),
@@ -860,30 +861,41 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
 
 
 _KERNELS: dict[int, object] = {}
-_SCRATCH: dict = {}  # the last call's scratch, reused while its shape fits
+SCRATCH_SHAPES = 8  # scratch shapes kept at once (a material retiled 8-fold has 4 sizes)
+# (blocks, n, cap) -> _scratch's arrays, in order of last use (the oldest first)
+_SCRATCH: dict[tuple[int, int, int], tuple] = {}
 
 
 def _scratch(blocks: int, n: int, cap: int) -> tuple:
     """Per-block device scratch: the list entries' forces and torques (ent), the reverse
     list (rev, revc), a build's old rows (old_j, old_code), and a step's forces, torques,
     Cartesian (or, in a build, wrapped fractional) positions and wrap counts (force,
-    torque, x, wrapv). Never read before the kernel writes it within a step, so it needs
-    no initialisation and is kept from call to call (one allocation per batch shape, not
-    one per MPM step)."""
+    torque, x, wrapv). The kernel writes it for an RVE before reading it for that RVE,
+    so it needs no initialisation and is kept from call to call.
+
+    Kept per shape (blocks, n, cap), the SCRATCH_SHAPES used last: the groups of a
+    retiled material (N, 2N, ... spheres) alternate every update, each with its own
+    arrays, allocated once. The device then holds the sum of these shapes' scratch, not
+    the largest one's (groups of N and 2N spheres at equal blocks and cap: 1.5 times the
+    2N group's), and a shape no longer launched (a group's RVE count or capacity changed)
+    until SCRATCH_SHAPES newer ones displace it."""
     key = (blocks, n, cap)
-    if _SCRATCH.get("key") != key:
-        _SCRATCH.clear()  # free the old arrays before allocating the new ones
-        _SCRATCH["key"] = key
-        _SCRATCH["arrays"] = (cuda.device_array((blocks, n, cap, 6), np.float64),
-                              cuda.device_array((blocks, n, 2 * cap), np.int32),
-                              cuda.device_array((blocks, n), np.int32),
-                              cuda.device_array((blocks, n, cap), np.int32),
-                              cuda.device_array((blocks, n, cap), np.int32),
-                              cuda.device_array((blocks, n, 3), np.float64),
-                              cuda.device_array((blocks, n, 3), np.float64),
-                              cuda.device_array((blocks, n, 3), np.float64),
-                              cuda.device_array((blocks, n, 3), np.int32))
-    return _SCRATCH["arrays"]
+    arrays = _SCRATCH.pop(key, None)
+    if arrays is None:
+        while len(_SCRATCH) >= SCRATCH_SHAPES:
+            del _SCRATCH[next(iter(_SCRATCH))]  # free the oldest before allocating
+        arrays = (cuda.device_array((blocks, n, cap, 6), np.float64),
+                  cuda.device_array((blocks, n, 2 * cap), np.int32),
+                  cuda.device_array((blocks, n), np.int32),
+                  cuda.device_array((blocks, n, cap), np.int32),
+                  cuda.device_array((blocks, n, cap), np.int32),
+                  cuda.device_array((blocks, n, 3), np.float64),
+                  cuda.device_array((blocks, n, 3), np.float64),
+                  cuda.device_array((blocks, n, 3), np.float64),
+                  cuda.device_array((blocks, n, 3), np.int32))
+    _SCRATCH[key] = arrays  # (re)inserted last: the most recently used
+    return arrays
+
 
 # the state fields the kernel reads and writes, in its argument order, and those of the
 # controls. The CPU's scratch of a step (force, torque, x, wrapv, link) is not state on
@@ -898,7 +910,7 @@ CONTROL_ARGS = ("e_step", "l_mean", "hdot_fixed", "l_ctrl", "servo_mask", "servo
 
 
 def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_out,
-           threads: int | None = None, max_blocks: int = MAX_BLOCKS) -> tuple | None:
+           threads: int | None = None, max_blocks: int | None = None) -> tuple | None:
     """Run the batch kernel on device arrays: d_nsteps (R,) int64, dev the state arrays
     in STATE_ARGS order, dctl the controls in CONTROL_ARGS order, d_status (R,) int64,
     d_out (R,5). Nothing crosses to the host (dem/device_batch.py keeps the state there).
@@ -907,11 +919,13 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
     SCRATCH_ARGS hold RVE g's last step.
 
     `threads` is the block size (threads per RVE; default the module's THREADS, read at
-    each call, which is how engine.advance's callers choose it); `max_blocks` bounds the
-    blocks in flight, and so the scratch: per block 6 doubles per list slot (entry
-    forces and torques), 4 ints per slot (old rows during a build, the reverse list) and
-    84 B per sphere (a step's forces, torques, positions and wrap counts)."""
+    each call, which is how engine.advance's callers choose it); `max_blocks` (default
+    MAX_BLOCKS, read at each call) bounds the blocks in flight, and so the scratch: per
+    block 6 doubles per list slot (entry forces and torques), 4 ints per slot (old rows
+    during a build, the reverse list) and 88 B per sphere (a step's forces, torques,
+    positions and wrap counts, the reverse-list counts)."""
     threads = THREADS if threads is None else int(threads)
+    max_blocks = MAX_BLOCKS if max_blocks is None else int(max_blocks)
     key = (threads, MAX_REGISTERS)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
@@ -919,7 +933,7 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
     if nrve == 0:
         return
     cap = dev[STATE_ARGS.index("nbr_j")].shape[2]
-    blocks = max(1, min(nrve, int(max_blocks)))
+    blocks = max(1, min(nrve, max_blocks))
     scratch = _scratch(blocks, n, cap)
     _KERNELS[key][blocks, threads](
         d_nsteps, float(law.young), float(law.kt_ratio), float(law.friction),
@@ -929,7 +943,7 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
 
 
 def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
-                  max_blocks: int = MAX_BLOCKS) -> None:
+                  max_blocks: int | None = None) -> None:
     """Advance every RVE r by nsteps[r] steps on the GPU: kernel.advance_batch's
     arguments (host arrays: RveState st, ContactLaw law, Controls ctl with the RVE index
     first, status (R,), out (R,5)), results written back into them.
@@ -938,10 +952,11 @@ def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
     and copies it back. A run keeps its state on the device instead (device_batch.py).
     `st.force` and `st.torque` (the CPU's scratch, read by nothing after a call) get the
     last step's values for the RVEs that stepped where the batch fits the blocks in
-    flight (R <= max_blocks), as tests compare them with the CPU's; otherwise they keep
-    what they held."""
+    flight (R <= max_blocks, default MAX_BLOCKS), as tests compare them with the CPU's;
+    otherwise they keep what they held."""
     if st.s.shape[0] == 0:
         return
+    max_blocks = MAX_BLOCKS if max_blocks is None else int(max_blocks)
     host = [getattr(st, name) for name in STATE_ARGS]
     for name, a in zip(STATE_ARGS, host, strict=True):
         if not a.flags.c_contiguous:
