@@ -10,7 +10,7 @@ ensembles of 8, and for every pair of ensembles prints the demo's measures
 (grainscale.analysis.unit_element_metrics): the peak q/p difference and the mean
 deviations of q/p and eps_v over their ranges, each also as a multiple of the noise
 the demo's verdict estimates from one ensemble's spread. Two ensembles differ only by
-chaos, so these ratios are what the verdict's "within twice the noise" must tolerate.
+chaos, so these ratios are what the verdict's noise band (analysis.NOISE_BAND) must tolerate.
 """
 
 from __future__ import annotations

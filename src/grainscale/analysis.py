@@ -3,9 +3,11 @@
 Stress paths: the unit element test's multiscale curves against pure DEM. Acceptance
 (coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute deviation of
 q/p and of eps_v over the common axial-strain range at most 3 % of each curve's range.
-Against a DEM ensemble the verdict also weighs the realisation noise: "pass" (the 3 %
-acceptance), "within realisation noise" (peak within 3 %, each mean deviation within
-twice what chaos alone leaves between two such means), or "fail".
+Against a DEM ensemble the verdict also weighs the realisation noise, what chaos alone
+leaves between two such means: "pass" (the 3 % acceptance), "within realisation noise"
+(a mean deviation above 3 %, within NOISE_BAND noise estimates), "offset beyond
+realisation noise" (a systematic offset, within 3 % plus NOISE_BAND noise estimates) or
+"fail" (beyond that, or the peak beyond 3 %).
 
 Also here, for scripts: the deposit of a collapse (deposit_profile, front_at_thickness),
 the intrusion's theory (k_phi, phi_for_k: seed Eq. 29), stress invariants (p_q), one
@@ -96,7 +98,18 @@ def deviation(x_ref, y_ref, x, y, x_max: float, n: int = 501) -> tuple[float, fl
     return float(np.mean(np.abs(b - a))), float(np.ptp(a)), float(np.ptp(b))
 
 
-def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
+# Chaos alone (studies/demo_noise.py, docs/validation.md §1): between two 8-realisation
+# means of the demo's RVE (21 pairs, each mean taken as the reference in turn: 42
+# comparisons), a mean deviation reached up to 2.94 times the noise estimated from the
+# reference's spread (median ~1; 8 realisations make that estimate rough). A deviation
+# beyond NOISE_BAND noise estimates is beyond all that chance gave: a systematic offset.
+NOISE_BAND = 3.0
+ACCEPTANCE = 0.03  # the unit element's acceptance (coupling issue, seed Fig. 3)
+MEASURES = {"q_over_p": "q/p", "volumetric_strain": "eps_v"}
+VERDICTS = ("pass", "within realisation noise", "offset beyond realisation noise", "fail")
+
+
+def unit_element_metrics(dem: dict, multiscale: dict) -> dict:
     """Agreement of two stress paths with columns axial_strain, q_over_p, volumetric_strain.
 
     Acceptance (coupling issue, seed Fig. 3): peak q/p within 3 %, and the mean absolute
@@ -104,7 +117,14 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
     curve's range. If `dem` is a DEM ensemble mean with `q_over_p_sem` and
     `volumetric_strain_sem` (rve.triaxial_ensemble), the realisation noise is weighed
     too: chaos alone leaves the difference of two such means normal with std
-    sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi).
+    sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi). Each mean deviation then lies
+    within 3 % ("pass"); or above it but within NOISE_BAND noise estimates ("within
+    realisation noise": chance may explain it); or beyond them but within 3 % plus
+    NOISE_BAND noise estimates ("offset beyond realisation noise": a systematic offset
+    that the acceptance and chance together may still explain); or beyond that
+    ("fail": an offset surely larger than the 3 %, as a coupling error gives). The peak
+    q/p, which chaos barely moves (0.2 % at most between two means of the demo's RVE),
+    keeps the 3 % ("pass" or "fail"). The verdict is the worst of the three.
 
     Parameters
     ----------
@@ -120,10 +140,12 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
         volumetric_strain, ``mad_KEY`` and ``mad_KEY_over_dem_range``,
         ``mad_KEY_over_multiscale_range``; ``peak_q_over_p_dem``,
         ``peak_q_over_p_multiscale``, ``peak_relative_difference``; ``pass`` (bool,
-        the 3 % acceptance). Against an ensemble also ``noise_KEY_over_dem_range``,
-        ``within_twice_noise`` (each mean deviation within twice the noise) and
-        ``verdict``: "pass", "within realisation noise" (peak within 3 %, each mean
-        deviation within twice the noise) or "fail".
+        the 3 % acceptance). Against an ensemble also, for each KEY,
+        ``noise_KEY_over_dem_range``, ``KEY_over_noise`` (the mean deviation in noise
+        estimates) and ``status_KEY`` (one of VERDICTS), ``status_peak_q_over_p``;
+        ``beyond_noise`` (the measures more than NOISE_BAND noise estimates off, even
+        within the 3 %), ``verdict`` (the worst status) and ``verdict_detail`` (each
+        measure's deviation, noise and status in words).
     """
     x_max = float(min(dem["axial_strain"].max(), multiscale["axial_strain"].max()))
     out = {"axial_strain_compared": x_max}
@@ -139,30 +161,55 @@ def unit_element_metrics(dem: dict, multiscale: dict) -> dict[str, float]:
     peak_ms = float(multiscale["q_over_p"][keep_ms].max())
     out.update(peak_q_over_p_dem=peak_dem, peak_q_over_p_multiscale=peak_ms,
                peak_relative_difference=abs(peak_ms - peak_dem) / peak_dem)
-    out["pass"] = bool(out["peak_relative_difference"] <= 0.03 and all(
-        out[f"mad_{k}_over_{w}_range"] <= 0.03 for k in ("q_over_p", "volumetric_strain")
-        for w in ("dem", "multiscale")))
-    if all(f"{k}_sem" in dem for k in ("q_over_p", "volumetric_strain")):
-        # a DEM ensemble mean (grainscale.rve.triaxial_ensemble) against a multiscale
-        # curve averaged over as many RVEs: chaos alone leaves their difference normal
-        # with std sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi)
-        grid = np.linspace(0.0, x_max, 501)
-        for key in ("q_over_p", "volumetric_strain"):
-            sem = np.interp(grid, dem["axial_strain"], dem[f"{key}_sem"])
-            noise = float(np.mean(2.0 * sem / np.sqrt(np.pi)))
-            out[f"noise_{key}_over_dem_range"] = noise / float(np.ptp(np.interp(
-                grid, dem["axial_strain"], dem[key])))
-        out["within_twice_noise"] = bool(all(
-            out[f"mad_{k}_over_dem_range"] <= 2.0 * out[f"noise_{k}_over_dem_range"]
-            for k in ("q_over_p", "volumetric_strain")))
-        # the 3 % of the mean deviations presumes a reference far less noisy than that;
-        # where chaos alone puts two means several % apart, the deviations are judged
-        # against that noise instead (studies/demo_noise.py measures how far)
-        out["verdict"] = ("pass" if out["pass"] else "within realisation noise"
-                          if out["within_twice_noise"]
-                          and out["peak_relative_difference"] <= 0.03 else "fail")
+    within = {"peak_q_over_p": out["peak_relative_difference"] <= ACCEPTANCE}
+    for key in MEASURES:
+        within[key] = all(out[f"mad_{key}_over_{w}_range"] <= ACCEPTANCE
+                          for w in ("dem", "multiscale"))
+    out["pass"] = bool(all(within.values()))
+    if all(f"{k}_sem" in dem for k in MEASURES):
+        out.update(_noise_verdict(dem, x_max, out, within))
     return out
 
+
+def _percent(x: float) -> str:
+    return f"{100 * x:.1f} %" if x >= 0.001 else f"{100 * x:.2g} %"
+
+
+def _noise_verdict(dem: dict, x_max: float, m: dict, within: dict) -> dict:
+    """The noise figures, each measure's status and the verdict (unit_element_metrics)."""
+    # a DEM ensemble mean (grainscale.rve.triaxial_ensemble) against a multiscale
+    # curve averaged over as many RVEs: chaos alone leaves their difference normal
+    # with std sqrt(2) sem, whose mean modulus is 2 sem / sqrt(pi)
+    grid = np.linspace(0.0, x_max, 501)
+    out = {"status_peak_q_over_p": "pass" if within["peak_q_over_p"] else "fail"}
+    words = [f"peak q/p {_percent(m['peak_relative_difference'])} apart: "
+             + ("within 3 %" if within["peak_q_over_p"] else "fail (above 3 %)")]
+    for key, name in MEASURES.items():
+        sem = np.interp(grid, dem["axial_strain"], dem[f"{key}_sem"])
+        noise = float(np.mean(2.0 * sem / np.sqrt(np.pi))) / float(np.ptp(np.interp(
+            grid, dem["axial_strain"], dem[key])))
+        dev = m[f"mad_{key}_over_dem_range"]
+        ratio = dev / noise if noise > 0 else (0.0 if dev == 0 else math.inf)
+        out[f"noise_{key}_over_dem_range"] = noise
+        out[f"{key}_over_noise"] = ratio
+        # the 3 % presumes a reference far less noisy than that; where chaos alone puts
+        # two means several % apart, a deviation above 3 % is judged against the noise
+        status = ("pass" if within[key] else
+                  "within realisation noise" if ratio <= NOISE_BAND else
+                  "offset beyond realisation noise"
+                  if dev <= ACCEPTANCE + NOISE_BAND * noise else "fail")
+        out[f"status_{key}"] = status
+        words.append(f"{name} {_percent(dev)} of its range, {ratio:.1f} noise estimates "
+                     f"({_percent(noise)}): "
+                     + (status if status != "pass" else "within 3 %" + (
+                         ", but beyond realisation noise (a systematic offset)"
+                         if ratio > NOISE_BAND else "")))
+    out["beyond_noise"] = [name for key, name in MEASURES.items()
+                           if out[f"{key}_over_noise"] > NOISE_BAND]
+    out["verdict"] = max((out[f"status_{k}"] for k in ("peak_q_over_p", *MEASURES)),
+                         key=VERDICTS.index)
+    out["verdict_detail"] = "; ".join(words)
+    return out
 
 
 def neighbour_median(x0: np.ndarray, values: np.ndarray, which: np.ndarray,

@@ -15,12 +15,13 @@ Writes into the output folder (default ./grainscale-demo):
 - `comparison.png`: q/p and volumetric strain against axial strain, all three,
 - `metrics.json`: peak q/p difference and mean deviations from the ensemble, with `pass`
   the unit element's acceptance (all within 3 %), the deviation chaos alone leaves
-  between two means of 8 realisations (`noise_*`, from the ensemble's spread),
-  `within_twice_noise`, and `verdict` ("pass", "within realisation noise" or "fail",
-  grainscale.analysis); the same figures against the single realisation under
-  `single_realisation` (grain-scale chaos alone puts those at several %). The reduced
-  RVE's eps_v noise alone is ~4 % of its range, so the verdict expected here is
-  "within realisation noise" (docs/validation.md §1).
+  between two means of 8 realisations (`noise_*`, from the ensemble's spread), each
+  mean deviation in those noise estimates (`*_over_noise`), each measure's `status_*`,
+  `verdict` ("pass", "within realisation noise", "offset beyond realisation noise" or
+  "fail", grainscale.analysis) and `verdict_detail` (the same in words); the same
+  figures against the single realisation under `single_realisation` (grain-scale chaos
+  alone puts those at several %). The reduced RVE's noise is 2-4 % of the ranges, so a
+  mean deviation above the 3 % is judged against it (docs/validation.md §1).
 """
 
 from __future__ import annotations
@@ -179,15 +180,13 @@ def run_demo(out: Path, case_only: bool = False, **reductions) -> int:
           f"{100 * metrics['mad_volumetric_strain_over_dem_range']:.1f} % of their ranges "
           f"(one realisation: {100 * one['mad_q_over_p_over_dem_range']:.1f} % and "
           f"{100 * one['mad_volumetric_strain_over_dem_range']:.1f} %)")
-    noise = (f"{100 * metrics['noise_q_over_p_over_dem_range']:.1f} % and "
-             f"{100 * metrics['noise_volumetric_strain_over_dem_range']:.1f} %")
     if metrics["pass"]:
         print("verdict: pass (within the 3 % of the unit element's acceptance)")
     else:
-        print(f"verdict: {metrics['verdict']}: above the unit element's 3 %; chaos alone "
-              f"puts two means of {REPLICAS} realisations {noise} apart, and the curves "
-              f"are {'within' if metrics['within_twice_noise'] else 'NOT within'} twice "
-              "that (a larger RVE or more points lower it: docs/validation.md §1)")
+        print(f"verdict: {metrics['verdict']} (above the unit element's 3 %; chaos alone "
+              f"leaves 2-4 % between two means of {REPLICAS} realisations: "
+              "docs/validation.md §1)")
+    print(f"  {metrics['verdict_detail']}")
     print(f"wrote {out}/comparison.png, metrics.json, dem.csv, dem_ensemble.csv, multiscale/ "
           f"(history.csv, "
           f"frames.pvd for ParaView) in {time.perf_counter() - t0:.0f} s")
