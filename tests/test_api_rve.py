@@ -4,6 +4,7 @@ their curves with repr, so the CSV holds the same doubles)."""
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -104,10 +105,14 @@ pressure = 100e3
 """
 
 
-def test_flow_gives_the_cli_table_and_names_bad_arguments(tmp_path):
+def test_flow_gives_the_cli_table_and_names_bad_arguments(tmp_path, capsys):
     """rve.flow and `grainscale rve flow` on the same packing and rates: the same steady
     rows to the last digit (the CLI writes the API's table with repr), and the fitted
-    table is the one the CLI writes. Bad arguments are named with the API's keywords."""
+    table is the one the CLI writes. Three rates, the friction rising with I at a
+    falling slope (0.34, 0.43, 0.51 at I = 0.033, 0.098, 0.30): the three-parameter law
+    passes through all three points, inside its bounds, so the fit exists; two rates
+    cannot fit it, and neither the API nor the CLI gives a table then. Bad arguments
+    are named with the API's keywords."""
     path = tmp_path / "flow.toml"
     path.write_text(FLOW)
     packing = tmp_path / "p.h5"
@@ -123,10 +128,29 @@ def test_flow_gives_the_cli_table_and_names_bad_arguments(tmp_path):
     assert list(res["table"]) == list(cli)
     for key, values in res["table"].items():
         np.testing.assert_array_equal(values, cli[key], err_msg=key)
-    if res["material"] is not None:  # three rates of a 100-sphere cell may not fit a law
-        assert out.with_suffix(".mu_i.toml").read_text() == res["material"]
-    else:
-        assert res["fit_error"] and not out.with_suffix(".mu_i.toml").exists()
+    assert res["fit_error"] is None and res["fits"]["mu"]["warning"] == ""
+    assert out.with_suffix(".mu_i.toml").read_text() == res["material"]
+    fit = res["fits"]["mu"]
+    law = fit["mu_s"] + (fit["mu_2"] - fit["mu_s"]) / (fit["I_0"] / res["table"]["I"] + 1.0)
+    np.testing.assert_allclose(law, res["table"]["mu"], rtol=1e-9)  # through the points
+    assert 0.0 < fit["mu_s"] < res["table"]["mu"].min() < res["table"]["mu"].max() < fit["mu_2"]
+    table = tomllib.loads(res["material"])["materials"]["rve_fit"]
+    assert table["type"] == "mu_i"
+    assert (table["mu_s"], table["mu_2"]) == (round(fit["mu_s"], 4), round(fit["mu_2"], 4))
+    assert table["I_0"] == pytest.approx(fit["I_0"], rel=1e-3)  # written to 4 digits
+    slowest = int(np.argmin(res["table"]["I"]))  # bulk density at the slowest rate
+    assert table["density"] == pytest.approx(
+        (1.0 - res["table"]["porosity"][slowest]) * case.rve.density, rel=1e-5)
+    two = tmp_path / "two.csv"
+    capsys.readouterr()
+    assert main(["rve", "flow", str(path), "--packing", str(packing), "--rates", "20", "60",
+                 "--strain", "0.6", "--steady-from", "0.2", "--out", str(two), "--quiet"]) == 0
+    assert "no mu(I) fit: 2 distinct inertial numbers" in capsys.readouterr().out
+    assert two.is_file() and not two.with_suffix(".mu_i.toml").exists()
+    res = gs.rve.flow(case, gs.rve.packing(case, packing), rates=[20, 60], strain=0.6,
+                      steady_from=0.2, progress=False)
+    assert res["material"] is None and res["fits"] == {}
+    assert res["fit_error"].startswith("2 distinct inertial numbers")
     for bad, shown in ((dict(strain=30.0), "strain = 30.0"),
                        (dict(tiles=0), "tiles = 0"),
                        (dict(steady_from=0.5, strain=0.6), "steady_from = 0.5"),
@@ -178,10 +202,15 @@ def test_generate_caches_a_packing_by_recipe_and_seed(tmp_path):
         gs.rve.generate(path, path=tmp_path / "cache.txt")
 
 
-def test_progress_in_a_log_is_a_few_plain_lines(params, capfd):
+def test_progress_in_a_log_is_a_few_plain_lines(params, capfd, monkeypatch):
     """With stderr a file (a batch log), an element test's progress is plain lines (one
-    at the end on a short test), never a bar redrawn at each row; progress=False is
-    silent."""
+    at the end while the interval between lines has not passed), never a bar redrawn at
+    each row; progress=False is silent."""
+    from grainscale.io import progress
+
+    # the interval made endless, so that a slow (loaded, cold-cache) test still gets the
+    # final line only; the lines' timing is test_progress.py's, on a fake clock
+    monkeypatch.setattr(progress, "PLAIN_INTERVAL_S", float("inf"))
     case = gs.rve.load(params)
     start = gs.rve.packing(case, PACKING)
     gs.rve.triaxial(case, start)
