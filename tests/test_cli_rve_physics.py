@@ -57,10 +57,14 @@ def _voigt_bulk_modulus(batch, young: float) -> float:
 
 def test_isotropic_compression_is_as_stiff_as_its_contact_network_allows(tmp_path):
     """100 -> 150 kPa: the secant bulk modulus dp / d(-eps_v) lies below the Voigt bound of
-    the packing's contacts at 150 kPa (scaled from 100 kPa by the contacts gained: the
-    coordination rises 2 %, 10 % allowed, 1.1 K_V(100 kPa)) and above half of it (grains
-    relax non-affinely, less in compression than in shear; measured 0.89 K_V = 17.4 MPa).
-    A sign slip in eps_v = ln(V/V0) or a servo aiming elsewhere fails."""
+    the packing's contacts (at 150 kPa: K_V(100 kPa) scaled by the contacts gained, the
+    coordination rising 5.40 -> 5.52, +2 %), by what the grains relax non-affinely:
+    measured 0.894 K_V(100 kPa) = 17.4 MPa. The ratio is a property of this packing's
+    contact network and contact law, not of the numerics: halving or doubling the
+    strain rate leaves it at 0.894, no local damping gives 0.890. Allowed: 0.87-0.92
+    (3 % either side: six times the largest numerical change). Contacts 10 % too soft
+    (kn = 0.9 E r*, mutation tried) give 0.81, kt/kn 0.4 instead of 0.8 gives 0.86; a
+    sign slip in eps_v = ln(V/V0) or a servo aiming elsewhere fails too."""
     rows = _run(tmp_path, "isotropic", "[isotropic]\npressure_final = 150e3\n"
                 "strain_rate = 0.05\noutput_interval = 2e-4\n")
     p, ev = rows["p"], rows["volumetric_strain"]
@@ -68,7 +72,9 @@ def test_isotropic_compression_is_as_stiff_as_its_contact_network_allows(tmp_pat
     k_secant = (p[-1] - p[0]) / -(ev[-1] - ev[0])
     k_voigt = _voigt_bulk_modulus(load_packing(PACKING, RVEParams(particles=150)),
                                   RVEParams().young_modulus)
-    assert 0.5 * k_voigt < k_secant < 1.1 * k_voigt, (k_secant, k_voigt)
+    z = rows["coordination"]
+    assert k_secant < k_voigt * z[-1] / z[0]  # the bound at 150 kPa
+    assert 0.87 * k_voigt < k_secant < 0.92 * k_voigt, (k_secant / k_voigt)
 
 
 def test_undrained_keeps_the_volume_while_the_stress_path_turns(tmp_path):
