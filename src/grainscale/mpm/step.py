@@ -144,22 +144,23 @@ class MPMState:
 
 # ------------------------------------------------------------------------- stages
 def shape_functions(s: MPMState) -> None:
-    """S_Ip and grad S_Ip at the current point positions."""
+    """S_Ip and grad S_Ip at the current point positions; on a graded grid each axis'
+    stencil sized from where the points are now (rectilinear.stencil)."""
     if s.grid.axes is None:
         s.base, s.w, s.dw = evaluate(s.points.x, s.points.lp, s.grid, s.shape,
                                      out=s.shape_buf)
-        return
-    gimp = s.shape == GIMP
-    ns = rectilinear.stencil(s.points.x, s.points.lp, s.grid.axes, gimp)
-    if s.comm.size > 1:  # one width on every rank: the kernels' loops are then alike
-        ns = np.asarray(s.comm.max([float(n) for n in ns]), dtype=np.int64)
-    if ns.max() > s.shape_buf[1].shape[2]:  # grown, never shrunk: no allocation per step
-        P = s.points.n
-        s.shape_buf = (s.shape_buf[0], np.zeros((P, 3, int(ns.max()))),
-                       np.zeros((P, 3, int(ns.max()))))
-    s.ns = ns
-    s.base, s.w, s.dw = rectilinear.evaluate(s.points.x, s.points.lp, s.grid.axes, gimp,
-                                             out=s.shape_buf, ns=ns)
+    else:
+        gimp = s.shape == GIMP
+        ns = rectilinear.stencil(s.points.x, s.points.lp, s.grid.axes, gimp)
+        if s.comm.size > 1:  # one width on every rank: the kernels' loops are then alike
+            ns = np.asarray(s.comm.max([float(n) for n in ns]), dtype=np.int64)
+        if ns.max() > s.shape_buf[1].shape[2]:  # grown, never shrunk: no allocation a step
+            P = s.points.n
+            s.shape_buf = (s.shape_buf[0], np.zeros((P, 3, int(ns.max()))),
+                           np.zeros((P, 3, int(ns.max()))))
+        s.ns = ns
+        s.base, s.w, s.dw = rectilinear.evaluate(s.points.x, s.points.lp, s.grid.axes, gimp,
+                                                 out=s.shape_buf, ns=ns)
     if s.scheme == "MUSL" and s.velocity_update != "flip":
         s.x_start = s.points.x.copy()  # the remap's affine term is taken where S_Ip was
 
