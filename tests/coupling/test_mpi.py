@@ -371,6 +371,46 @@ def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp
     assert set(np.unique(sizes["rve_particles"])) == {120.0, 240.0}
 
 
+def test_adaptive_updates_are_rank_thread_independent_and_resume_bitwise(rve_case, tmp_path):
+    """The small unit element with quasi-static RVEs from 4 packings and adaptive
+    updates (tolerance 1e-4, at most 3 deferred steps), so that RVEs wait or step
+    depending on their own increments: one history.csv, to the byte, on 1 rank with 1
+    and 2 threads, on 2 ranks with rebalancing every 5 steps, and on 3 ranks stopped at
+    step 9 (deferred increments in the checkpoint) and resumed on 2. cost.json says that
+    RVEs did wait."""
+    case = tomllib.loads(rve_case.read_text())
+    case["materials"]["sand"].update(time_integration="quasi_static",
+                                     allow_rve_damping=True, update_tolerance=1e-4,
+                                     max_deferred_steps=3)
+    case["solver"]["rebalance_every"] = 5
+    path = tmp_path / "adaptive.toml"
+    path.write_text(tomli_w.dumps(case))
+    ref = tmp_path / "serial"
+    assert main(["run", str(path), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
+    history = (ref / "history.csv").read_text()
+    assert history.count("\n") > 20
+    stepped = json.loads((ref / "cost.json").read_text())["fraction_of_rves_stepped"]
+    assert 0.3 < stepped < 0.95, stepped
+
+    def fresh(name):  # the serial run's packings, so no run regenerates them
+        out = tmp_path / name
+        shutil.copytree(ref / "packings", out / "packings")
+        return out
+
+    out = fresh("threads2")
+    r = subprocess.run([sys.executable, "-m", "grainscale", "run", str(path), "--out",
+                        str(out), "--quiet", "--threads", "2"], capture_output=True, text=True,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "2"}, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 threads differ"
+    out = fresh("ranks2")
+    r = mpirun(2, ["run", str(path), "--out", str(out), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 ranks differ"
+    out = fresh("ranks3")
+    assert interrupted_history(path, out, first=3, steps=9, then=2) == history
+
+
 def test_ranks_know_their_place_on_the_node(tmp_path):
     """node_rank numbers the ranks of a node 0..n-1 (each picks GPU node_rank % GPUs
     under `--device cuda`, cuda_kernel.select_gpu); node_ranks counts them."""

@@ -109,6 +109,18 @@ def unit_element(folder: Path) -> Path:
     return path
 
 
+def adaptive_unit_element(folder: Path) -> Path:
+    """`unit_element` with quasi-static RVEs and adaptive updates (tolerance 4e-5, at
+    most 2 deferred steps): some MPM steps leave the RVE unstepped on the device."""
+    case = tomllib.loads(unit_element(folder).read_text())
+    case["materials"]["sand"].update(time_integration="quasi_static",
+                                     allow_rve_damping=True, update_tolerance=4e-5,
+                                     max_deferred_steps=2)
+    path = folder / "adaptive_unit_element.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
 def column(folder: Path) -> Path:
     """examples/column_collapse/quick.toml shrunk to two material points (a 20 x 10 x
     10 mm column, one point a cell): 5 MPM steps of the geostatic stage with its gate
@@ -182,7 +194,7 @@ def coupled_runs() -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for make in (unit_element, column):
+        for make in (unit_element, column, adaptive_unit_element):
             path = make(folder)
             hist = {}
             for device in ("cpu", "cuda"):
@@ -191,7 +203,9 @@ def coupled_runs() -> dict:
                                    "--threads", "1", "--device", device])
                 assert code == 0, (path.stem, device, code)
                 hist[device] = read_columns(run / "history.csv")
-            res = {"rows": len(hist["cpu"]["step"]), "last": {}}
+            cost = json.loads((folder / f"{path.stem}_cuda" / "cost.json").read_text())
+            res = {"rows": len(hist["cpu"]["step"]), "last": {},
+                   "stepped": cost["fraction_of_rves_stepped"]}
             for name, a in hist["cpu"].items():
                 a, b = np.asarray(a), np.asarray(hist["cuda"][name])
                 res[name] = rel(a, b)

@@ -308,6 +308,12 @@ class DEMMaterialCfg(StrictModel):
     allow_rve_damping: bool = False
     min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
     strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
+    # adaptive updates (quasi_static only): an RVE whose accumulated increment since its
+    # last DEM update (max |F_acc - I|) is below this is not stepped, its stress the last
+    # one rotated with the accumulated spin (docs/coupling.md); 0: every RVE every step
+    update_tolerance: Annotated[float, Field(ge=0, le=1e-2)] = 0.0
+    # ... and is stepped at least every this many MPM steps whatever its increment
+    max_deferred_steps: Annotated[int, Field(ge=1, le=10_000)] = 20
     # an RVE cell narrower than this many mean grain diameters across a face pair is
     # doubled along that direction, grains repeated (dem/retile.py); 0: never
     retile_width: Annotated[float, Field(ge=0, le=20)] = 4.0
@@ -695,6 +701,13 @@ def check_case(case: Case) -> None:
                                   f"a stress (solver.gravity = {list(case.solver.gravity)})")
     dynamic = [n for n, m in case.materials.items()
                if m.type == "dem" and m.time_integration == "dynamic"]
+    for name in dynamic:
+        if case.materials[name].update_tolerance > 0:
+            raise ConfigError(
+                f"materials.{name}.update_tolerance = "
+                f"{case.materials[name].update_tolerance}: adaptive updates defer an RVE's "
+                "increment, which a real-time RVE cannot (its clock is the MPM's); valid: 0, "
+                "or time_integration = 'quasi_static'")
     if dynamic and case.rve is not None:
         if "damping" not in case.rve.model_fields_set:
             case.rve.damping = 0.0  # written so in case.resolved.toml

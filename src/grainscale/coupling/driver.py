@@ -63,10 +63,12 @@ def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: floa
     dem = sum(m.seconds for m in s.materials if isinstance(m, RVEMaterial))
     n_rve = sum(m.n_rve for m in s.materials if isinstance(m, RVEMaterial))
     dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
+    updates = sum(m.rve_updates for m in s.materials if isinstance(m, RVEMaterial))
     c = s.comm
     mine = {"dem": dem, "comm": comm_seconds, "wait": wait_seconds,
             "mpm": step_seconds - dem - comm_seconds - wait_seconds,
             "other": wall_seconds - step_seconds, "rves": n_rve, "dem_steps": dem_steps,
+            "rve_updates": updates,
             "reduced_bytes": c.bytes_reduced}
     ranks = c.gather(mine)
     if ranks is None:
@@ -87,6 +89,9 @@ def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: floa
         report["core_seconds_per_rve_per_step"] = dem_all * threads / (report["rves"] * steps)
         report["dem_steps_per_rve_per_step"] = (sum(r["dem_steps"] for r in ranks)
                                                 / (report["rves"] * steps))
+        # adaptive updates step only some RVEs each MPM step (1.0 without them)
+        report["fraction_of_rves_stepped"] = (sum(r["rve_updates"] for r in ranks)
+                                              / (report["rves"] * steps))
     return report
 
 
@@ -98,7 +103,8 @@ def format_cost(r: dict) -> str:
             f"{r['ranks']} rank(s) x {r['threads']} thread(s))")
     if "core_seconds_per_rve_per_step" in r:
         text += (f"; {r['rves']} RVEs: {r['core_seconds_per_rve_per_step'] * 1e3:.3g} "
-                 f"core-ms per RVE per step ({r['dem_steps_per_rve_per_step']:.0f} DEM steps)")
+                 f"core-ms per RVE per step ({r['dem_steps_per_rve_per_step']:.3g} DEM steps, "
+                 f"{100 * r['fraction_of_rves_stepped']:.3g} % of the RVEs stepped)")
     return text
 
 

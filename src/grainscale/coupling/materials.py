@@ -190,7 +190,9 @@ def prepare(case: Case, case_dir: Path, out: Path, progress: bool = True):
                            strain_per_substep=cfg.strain_per_substep,
                            retile_width=cfg.retile_width,
                            retile_max_factor=cfg.retile_max_factor,
-                           device=case.solver.device)
+                           device=case.solver.device,
+                           update_tolerance=cfg.update_tolerance,
+                           max_deferred_steps=cfg.max_deferred_steps)
 
     return factory
 

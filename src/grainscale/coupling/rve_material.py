@@ -81,7 +81,9 @@ class RVEMaterial:
                  strain_per_substep: float = _DEM.strain_per_substep,
                  local: np.ndarray | None = None, assignment: np.ndarray | None = None,
                  retile_width: float = _DEM.retile_width,
-                 retile_max_factor: int = _DEM.retile_max_factor, device: str = "cpu"):
+                 retile_max_factor: int = _DEM.retile_max_factor, device: str = "cpu",
+                 update_tolerance: float = _DEM.update_tolerance,
+                 max_deferred_steps: int = _DEM.max_deferred_steps):
         """n_points: points of this material over all ranks; local: the indices (into
         them) of the points this process holds (default: all). The packing of each point
         is drawn for all points with the seed, so it does not depend on the ranks, or
@@ -89,9 +91,19 @@ class RVEMaterial:
         retile_width: cells narrower than this many mean grain diameters are doubled
         (0: never), up to retile_max_factor times the packing's spheres. The defaults
         are those of a case file's "dem" material (config.case.DEMMaterialCfg).
-        device: where `update` steps the RVEs, "cpu" or "cuda" (solver.device)."""
+        device: where `update` steps the RVEs, "cpu" or "cuda" (solver.device).
+        update_tolerance, max_deferred_steps: adaptive updates (quasi_static only; 0:
+        every RVE every step), see `update`."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
+        if update_tolerance > 0 and mode != "quasi_static":
+            raise ValueError(f"update_tolerance = {update_tolerance}: adaptive updates need "
+                             "mode 'quasi_static'")
+        if not update_tolerance >= 0 or max_deferred_steps < 1:
+            raise ValueError(f"update_tolerance = {update_tolerance}, max_deferred_steps = "
+                             f"{max_deferred_steps}: valid >= 0 and >= 1")
+        self.update_tolerance = float(update_tolerance)
+        self.max_deferred_steps = int(max_deferred_steps)
         engine.check_device(device)
         self.device = device
         self._dev: dict[int, object] = {}  # id(group) -> its DeviceBatch (device "cuda")
@@ -123,6 +135,14 @@ class RVEMaterial:
                            for b in library)
         self.theta_prev = np.zeros(n_points)
         self.spin_rate = np.zeros(n_points)
+        # adaptive updates: each RVE's increment since its last DEM update, H_acc with
+        # I + H_acc = prod (I + dH) (kept as H_acc, not the product, so that small
+        # increments keep their digits; 0: nothing owed), the MPM steps and the time [s]
+        # it has been deferred
+        self.H_acc = np.zeros((n_points, 3, 3))
+        self.deferred = np.zeros(n_points, np.int64)
+        self.t_acc = np.zeros(n_points)
+        self.rve_updates = 0  # sum over MPM steps of the RVEs stepped
         self.substeps = 0  # DEM steps of the last update (largest over RVEs)
         self.seconds = 0.0  # wall time spent in DEM updates
         self.rve_steps = 0  # sum over RVEs of DEM steps taken
@@ -216,10 +236,30 @@ class RVEMaterial:
         f_a = -V sigma_ab dS/dx_b would take it transposed, so the MPM gets the symmetric
         part. The stress and the batch's `stiffness` are those of the state the increment
         reached (kernel.py item 8; wave_speed).
+
+        Adaptive updates (update_tolerance > 0, quasi-static RVEs): the increments are
+        composed, I + H_acc <- (I + dH)(I + H_acc), and an RVE is stepped only once
+        max |H_acc| reaches the tolerance or it has been deferred max_deferred_steps MPM
+        steps; it then takes the whole H_acc as one increment (the cell ends exactly at
+        (I + H_acc) h, as if it had followed every step) over
+        ceil(max |H_acc| / strain_per_substep) DEM steps. Meanwhile its stress is the
+        last update's rotated with the accumulated spin, R sym(sigma) R^T with
+        I + H_acc = R U (objective; docs/coupling.md: the error is the tangent modulus
+        times the tolerance at most, and does not accumulate).
         """
         if not self.groups:
             return
         t0 = time.perf_counter()
+        adaptive = self.update_tolerance > 0
+        if adaptive:
+            # (I + dH)(I + H) = I + dH + H + dH H
+            self.H_acc = dH + self.H_acc + np.einsum("pab,pbc->pac", dH, self.H_acc)
+            self.t_acc += dt
+            inc = self.H_acc
+            due = ((np.abs(inc).max(axis=(1, 2)) >= self.update_tolerance)
+                   | (self.deferred + 1 >= self.max_deferred_steps))
+        else:
+            inc = dH
         most = 0
         for batch, rows in zip(self.groups, self.rows, strict=True):
             if self.mode == "dynamic":
@@ -227,12 +267,19 @@ class RVEMaterial:
                 nsteps = np.full(batch.n_rve, n, np.int64)
                 dt_dem = dt / n
             else:
-                size = np.abs(dH[rows]).max(axis=(1, 2))
+                size = np.abs(inc[rows]).max(axis=(1, 2))
                 nsteps = np.maximum(self.min_substeps,
                                     np.ceil(size / self.strain_per_substep)).astype(np.int64)
                 dt_dem = self.dt_crit
+            if adaptive:
+                stepped = due[rows]
+                nsteps[~stepped] = 0
+                if not stepped.any():  # the group waits: no kernel call at all
+                    stress[rows] = self._predicted(batch, rows)
+                    continue
             try:
-                ctrl = engine.increment_control(batch, dH[rows], nsteps, dt_dem)
+                ctrl = engine.increment_control(batch, inc[rows], np.maximum(nsteps, 1),
+                                                dt_dem)
                 target = self._device(batch)
                 engine.advance(target, nsteps, dt_dem, self.cp, ctrl, device=self.device)
             except engine.RVEError as err:
@@ -242,16 +289,38 @@ class RVEMaterial:
                     f"material {self.name!r}, its point {point}: {err} (the run stops; "
                     "history and checkpoints so far are intact)") from None
             self._reduce_cells(batch, target)
-            stress[rows] = _sym(batch.stress)
+            if adaptive:
+                stress[rows] = np.where(stepped[:, None, None], _sym(batch.stress),
+                                        self._predicted(batch, rows))
+            else:
+                stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
             self.rve_steps += int(nsteps.sum())
             self.work[rows] += nsteps * (batch.n_particles + batch.ncontact)
         self._retile()
         theta = self._mean_rotation()
-        self.spin_rate = (theta - self.theta_prev) / dt
-        self.theta_prev = theta
+        if adaptive:  # the spin rate of an RVE over the time since its last update
+            self.spin_rate[due] = (theta[due] - self.theta_prev[due]) / self.t_acc[due]
+            self.theta_prev[due] = theta[due]
+            self.H_acc[due] = 0.0
+            self.t_acc[due] = 0.0
+            self.deferred[due] = 0
+            self.deferred[~due] += 1
+            self.rve_updates += int(due.sum())
+        else:
+            self.spin_rate = (theta - self.theta_prev) / dt
+            self.theta_prev = theta
+            self.rve_updates += self.n_points
         self.substeps = most
         self.seconds += time.perf_counter() - t0
+
+    def _predicted(self, batch: RVEBatch, rows: np.ndarray) -> np.ndarray:
+        """(R,3,3) R sym(sigma) R^T [Pa] of a group's RVEs: the stress of each one's last
+        update turned by the rotation R of its accumulated increment I + H_acc = R U (the
+        polar decomposition, R = W V^T of I + H_acc = W S V^T)."""
+        w, _, vt = np.linalg.svd(np.eye(3) + self.H_acc[rows])
+        rot = w @ vt
+        return rot @ _sym(batch.stress) @ np.swapaxes(rot, 1, 2)
 
     def _reduce_cells(self, batch: RVEBatch, target) -> None:
         """lattice.reduce_cells of a group; on the GPU only the RVEs to reduce make the
@@ -365,6 +434,9 @@ class RVEMaterial:
         out["spin_rate"] = self.spin_rate
         out["assignment"] = self.assignment
         out["work"] = self.work
+        out["H_acc"] = self.H_acc
+        out["deferred"] = self.deferred
+        out["t_acc"] = self.t_acc
         return out
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -385,6 +457,10 @@ class RVEMaterial:
         n = len(self.theta_prev)
         self.spin_rate = np.asarray(state.get("spin_rate", np.zeros(n)), float).copy()
         self.work = np.asarray(state.get("work", np.zeros(n)), float).copy()
+        # absent in checkpoints before adaptive updates: nothing deferred
+        self.H_acc = np.asarray(state.get("H_acc", np.zeros((n, 3, 3))), float).copy()
+        self.deferred = np.asarray(state.get("deferred", np.zeros(n)), np.int64).copy()
+        self.t_acc = np.asarray(state.get("t_acc", np.zeros(n)), float).copy()
         self._forget_devices()
         # no refresh: the saved stress and moduli are already those of the saved state
 
@@ -420,7 +496,8 @@ class RVEMaterial:
                         for p in parts]
         out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in STATE_FIELDS}
         out["rve_particles"] = np.concatenate([_counts(p) for p in parts])
-        for key in ("theta_prev", "spin_rate", "assignment", "work", "rve_capacity"):
+        for key in ("theta_prev", "spin_rate", "assignment", "work", "rve_capacity", "H_acc",
+                    "deferred", "t_acc"):
             if all(key in p for p in parts):
                 out[key] = np.concatenate([p[key] for p in parts])
         return out
