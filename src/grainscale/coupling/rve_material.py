@@ -274,8 +274,10 @@ class RVEMaterial:
             if adaptive:
                 stepped = due[rows]
                 nsteps[~stepped] = 0
-                if not stepped.any():  # the group waits: no kernel call at all
-                    stress[rows] = self._predicted(batch, rows)
+                wait = np.flatnonzero(~stepped)
+                if wait.size:
+                    stress[rows[wait]] = self._predicted(batch, rows, wait)
+                if wait.size == batch.n_rve:  # the group waits: no kernel call at all
                     continue
             try:
                 ctrl = engine.increment_control(batch, inc[rows], np.maximum(nsteps, 1),
@@ -290,15 +292,14 @@ class RVEMaterial:
                     "history and checkpoints so far are intact)") from None
             self._reduce_cells(batch, target)
             if adaptive:
-                stress[rows] = np.where(stepped[:, None, None], _sym(batch.stress),
-                                        self._predicted(batch, rows))
+                stress[rows[stepped]] = _sym(batch.stress[stepped])
             else:
                 stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
             self.rve_steps += int(nsteps.sum())
             self.work[rows] += nsteps * (batch.n_particles + batch.ncontact)
         self._retile()
-        theta = self._mean_rotation()
+        theta = self._mean_rotation(due if adaptive else None)
         if adaptive:  # the spin rate of an RVE over the time since its last update
             self.spin_rate[due] = (theta[due] - self.theta_prev[due]) / self.t_acc[due]
             self.theta_prev[due] = theta[due]
@@ -314,13 +315,14 @@ class RVEMaterial:
         self.substeps = most
         self.seconds += time.perf_counter() - t0
 
-    def _predicted(self, batch: RVEBatch, rows: np.ndarray) -> np.ndarray:
-        """(R,3,3) R sym(sigma) R^T [Pa] of a group's RVEs: the stress of each one's last
-        update turned by the rotation R of its accumulated increment I + H_acc = R U (the
-        polar decomposition, R = W V^T of I + H_acc = W S V^T)."""
-        w, _, vt = np.linalg.svd(np.eye(3) + self.H_acc[rows])
+    def _predicted(self, batch: RVEBatch, rows: np.ndarray, which: np.ndarray) -> np.ndarray:
+        """(k,3,3) R sym(sigma) R^T [Pa] of a group's RVEs `which` (their points
+        rows[which]): the stress of each one's last update turned by the rotation R of
+        its accumulated increment I + H_acc = R U (the polar decomposition, R = W V^T of
+        I + H_acc = W S V^T)."""
+        w, _, vt = np.linalg.svd(np.eye(3) + self.H_acc[rows[which]])
         rot = w @ vt
-        return rot @ _sym(batch.stress) @ np.swapaxes(rot, 1, 2)
+        return rot @ _sym(batch.stress[which]) @ np.swapaxes(rot, 1, 2)
 
     def _reduce_cells(self, batch: RVEBatch, target) -> None:
         """lattice.reduce_cells of a group; on the GPU only the RVEs to reduce make the
@@ -334,11 +336,19 @@ class RVEMaterial:
             lattice.reduce_cells(batch)
             target.push(todo)
 
-    def _mean_rotation(self) -> np.ndarray:
-        """(P,) homogenise.mean_rotation of each point's RVE, on the GPU where it lives."""
-        if self.device != "cuda":
+    def _mean_rotation(self, due: np.ndarray | None = None) -> np.ndarray:
+        """(P,) homogenise.mean_rotation of each point's RVE, on the GPU where it lives;
+        with `due` (P,) bool on the CPU, of those RVEs only (the others' entries are
+        theta_prev: a waiting RVE has not turned)."""
+        if self.device == "cuda":
+            return self._per_point(lambda b: self._device(b).mean_rotation())
+        if due is None:
             return self._per_point(homogenise.mean_rotation)
-        return self._per_point(lambda b: self._device(b).mean_rotation())
+        theta = self.theta_prev.copy()
+        for b, rows in zip(self.groups, self.rows, strict=True):
+            sel = np.flatnonzero(due[rows])
+            theta[rows[sel]] = b.rot[sel].mean(axis=1)
+        return theta
 
     def _retile(self) -> None:
         """Double every cell narrower than retile_width mean diameters (dem/retile.py)."""
