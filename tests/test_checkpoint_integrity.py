@@ -356,3 +356,18 @@ def test_a_full_disk_while_writing_history_stops_cleanly(reference, tmp_path, mo
     assert _run(case, out, "--resume") == 0
     _, full, _ = reference
     assert (out / "history.csv").read_bytes() == (full / "history.csv").read_bytes()
+
+
+def test_a_key_added_since_the_checkpoint_at_its_neutral_value_is_no_change():
+    """A checkpoint written before materials.NAME.update_tolerance existed resumes with
+    the key at 0 (adaptive updates off: the same physics), not at another value."""
+    from grainscale.coupling.checkpoints import changed_keys
+
+    old = {"materials": {"sand": {"type": "dem", "library": 2}}}
+    new = {"materials": {"sand": {"type": "dem", "library": 2, "update_tolerance": 0.0,
+                                  "max_deferred_steps": 20}}}
+    assert changed_keys(old, new) == []
+    new["materials"]["sand"]["update_tolerance"] = 2e-6
+    assert [k for k, _, _ in changed_keys(old, new)] == ["materials.sand.update_tolerance"]
+    assert [k for k, _, _ in changed_keys(new, old)] == [
+        "materials.sand.update_tolerance", "materials.sand.max_deferred_steps"]
