@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import platform
+import sys
 import time
 from pathlib import Path
 
@@ -30,21 +30,13 @@ from grainscale.mpm import rectilinear
 from grainscale.mpm.setup import build_state
 from grainscale.mpm.step import step
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from dem_update_cost import cpu_model  # noqa: E402
+
 CASE = Path(__file__).resolve().parents[1] / "examples" / "intrusion" / "seed_quick.toml"
 TWIN = {"type": "mohr_coulomb", "density": 1600.0, "youngs_modulus": 10e6,
         "poisson_ratio": 0.3, "friction_angle": 20.07, "dilation_angle": 0.0,
         "cohesion": 0.0, "tension_cutoff": 0.0}
-
-
-def cpu_name() -> str:
-    """The CPU's model name (every figure is named with its machine)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def global_width(x, lp, axes, gimp=True) -> np.ndarray:
@@ -89,10 +81,10 @@ def main() -> None:
     for name, r in (("per-axis stencil", per_axis), ("one global width", single)):
         print(f"{name:18s}: {r['s_per_step'] * 1e3:8.2f} ms per MPM step, stencil "
               f"{r['stencil']} ({r['nodes_per_point']} nodes a point), {r['points']} points")
-    print(f"{cpu_name()}, {args.threads} thread(s): speed-up {ratio:.2f}x; kinetic energies "
+    print(f"{cpu_model()}, {args.threads} thread(s): speed-up {ratio:.2f}x; kinetic energies "
           f"{per_axis['kinetic_energy']:.9e} and {single['kinetic_energy']:.9e} (the same "
           "physics)")
-    print(json.dumps({"cpu": cpu_name(),
+    print(json.dumps({"cpu": cpu_model(),
                       "threads": args.threads, "steps": args.steps, "per_axis": per_axis,
                       "global": single, "speedup": ratio}))
 
