@@ -371,6 +371,7 @@ def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp
     assert set(np.unique(sizes["rve_particles"])) == {120.0, 240.0}
 
 
+@pytest.mark.validation  # 13 s; the material-level tests are in the fast tier
 def test_adaptive_updates_are_rank_thread_independent_and_resume_bitwise(rve_case, tmp_path):
     """The small unit element with quasi-static RVEs from 4 packings and adaptive
     updates (tolerance 1e-4, at most 3 deferred steps), so that RVEs wait or step
