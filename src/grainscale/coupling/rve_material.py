@@ -147,8 +147,9 @@ class RVEMaterial:
         self.seconds = 0.0  # wall time spent in DEM updates
         self.rve_steps = 0  # sum over RVEs of DEM steps taken
         self.retiled = 0  # cells doubled so far on this process
-        # per RVE, particle-steps plus contact-steps since the last rebalancing: the
-        # measured work that decides the load balance over ranks
+        # per RVE, particle-steps plus contact-steps (the end-of-increment pass
+        # included) since the last rebalancing: the measured work that decides the load
+        # balance over ranks
         self.work = np.zeros(n_points)
         for b in self.groups:
             engine.refresh(b, self.cp)
@@ -297,7 +298,10 @@ class RVEMaterial:
                 stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
             self.rve_steps += int(nsteps.sum())
-            self.work[rows] += nsteps * (batch.n_particles + batch.ncontact)
+            # particle- and contact-steps, and the end-of-increment evaluation of an RVE
+            # that stepped (one more pass over its contacts, kernel.py item 8)
+            self.work[rows] += (nsteps * (batch.n_particles + batch.ncontact)
+                                + (nsteps > 0) * batch.ncontact)
         self._retile()
         theta = self._mean_rotation(due if adaptive else None)
         if adaptive:  # the spin rate of an RVE over the time since its last update
