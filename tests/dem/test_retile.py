@@ -63,3 +63,55 @@ def test_batch_widths_and_the_edge_to_double():
     assert widths(h2[None])[0].min() > w.min()
     np.testing.assert_allclose(widths(np.stack([h, h2])),
                                [perpendicular_widths(h), perpendicular_widths(h2)], rtol=1e-12)
+
+
+def _batch(n_rve: int, seed: int = 0):
+    """A batch whose every array holds distinct values (so a misplaced row shows)."""
+    from dataclasses import fields
+
+    from grainscale.dem.state import RVEBatch, allocate
+
+    b = allocate(n_rve, 5, 4)
+    rng = np.random.default_rng(seed)
+    for f in fields(RVEBatch):
+        a = getattr(b, f.name)
+        a[...] = rng.integers(0, 100, a.shape).astype(a.dtype)
+    return b
+
+
+def test_removing_rves_moves_only_the_tail_and_keeps_every_other_rve():
+    """remove_rves: the batch without RVEs 1 and 4 of 8 equals take() of the RVEs it
+    reports, array for array, and is a view of the original's rows (no copy); with more
+    than half removed it is a compact copy."""
+    from dataclasses import fields
+
+    from grainscale.dem.state import RVEBatch, remove_rves
+
+    b = _batch(8)
+    ref = b.copy()
+    rest, order = remove_rves(b, [4, 1])
+    assert sorted(order.tolist()) == [0, 2, 3, 5, 6, 7] and rest.n_rve == 6
+    want = ref.take(order)
+    for f in fields(RVEBatch):
+        np.testing.assert_array_equal(getattr(rest, f.name), getattr(want, f.name))
+        assert np.shares_memory(getattr(rest, f.name), getattr(b, f.name))
+    b = _batch(8)
+    rest, order = remove_rves(b, [0, 1, 2, 3, 4])
+    assert order.tolist() == [5, 6, 7] and not np.shares_memory(rest.s, b.s)
+
+
+def test_extending_a_batch_reuses_its_spare_rows():
+    """extend: RVEs appended one call at a time give concatenate()'s batch; the second
+    append writes into the storage the first made (the same arrays, nothing copied)."""
+    from dataclasses import fields
+
+    from grainscale.dem.state import RVEBatch, concatenate, extend
+
+    base, x1, x2 = _batch(10), _batch(1, 1), _batch(1, 2)
+    out, store = extend(base.copy(), [x1])
+    assert store.n_rve >= 12  # room for the next
+    out2, store2 = extend(out, [x2], store)
+    assert store2 is store and np.shares_memory(out2.s, store.s)
+    want = concatenate([base, x1, x2])
+    for f in fields(RVEBatch):
+        np.testing.assert_array_equal(getattr(out2, f.name), getattr(want, f.name))

@@ -38,9 +38,11 @@ from grainscale.dem.state import (
     STATE_FIELDS,
     RVEBatch,
     concatenate,
+    extend,
     from_state_arrays,
     grow_capacity,
     padded,
+    remove_rves,
     state_arrays,
     unpadded,
 )
@@ -127,6 +129,7 @@ class RVEMaterial:
         self._none = library[0].take(np.zeros(0, np.int64))  # the shape of "no RVE"
         self.groups: list[RVEBatch] = []
         self.rows: list[np.ndarray] = []
+        self._storage: dict[int, RVEBatch] = {}  # sphere count -> the rows its group views
         if n_points:
             self.groups = [concatenate([library[k] for k in self.assignment])]
             self.rows = [np.arange(n_points)]
@@ -362,26 +365,40 @@ class RVEMaterial:
             if not any(self._thin(b, retile.widths(b.h)).any() for b in self.groups):
                 return
             self._sync()
-        pieces: dict[int, list[tuple[RVEBatch, np.ndarray]]] = {}  # by sphere count
+        # by sphere count: the groups as they stay, and the cells doubled into each
+        kept: dict[int, tuple[RVEBatch, np.ndarray]] = {}
+        doubled: dict[int, list[tuple[RVEBatch, int]]] = {}
         for batch, rows in zip(self.groups, self.rows, strict=True):
             n = batch.n_particles
             w = retile.widths(batch.h)
             thin = self._thin(batch, w)
             if 2 * n > self.max_particles or not thin.any():
-                pieces.setdefault(n, []).append((batch, rows))
+                kept[n] = (batch, rows)
                 continue
-            pieces.setdefault(n, []).append((batch.take(np.flatnonzero(~thin)), rows[~thin]))
-            for r in np.flatnonzero(thin):
-                pieces.setdefault(2 * n, []).append(
-                    (retile.double_cell(batch, r, int(np.argmin(w[r]))), rows[[r]]))
+            idx = np.flatnonzero(thin)
+            for r in idx:
+                doubled.setdefault(2 * n, []).append(
+                    (retile.double_cell(batch, r, int(np.argmin(w[r]))), int(rows[r])))
                 self.retiled += 1
+            if idx.size < batch.n_rve:  # the rest stays where it is: no whole-group copy
+                rest, order = remove_rves(batch, idx)
+                kept[n] = (rest, rows[order])
+        if not doubled:
+            return
         self.groups, self.rows = [], []
-        for n in sorted(pieces):
-            parts = [(b, r) for b, r in pieces[n] if len(r)]
-            if parts:
-                self.groups.append(parts[0][0] if len(parts) == 1
-                                   else concatenate([b for b, _ in parts]))
-                self.rows.append(np.concatenate([r for _, r in parts]))
+        for n in sorted(set(kept) | set(doubled)):
+            new = doubled.get(n, [])
+            if n in kept:
+                batch, rows = kept[n]
+            else:
+                (batch, first), new = new[0], new[1:]
+                rows = np.array([first])
+            if new:  # appended into the group's spare rows where it has them
+                batch, self._storage[n] = extend(batch, [b for b, _ in new],
+                                                 self._storage.get(n))
+                rows = np.concatenate([rows, [r for _, r in new]])
+            self.groups.append(batch)
+            self.rows.append(rows)
         self._forget_devices()
 
     def _thin(self, batch: RVEBatch, widths: np.ndarray) -> np.ndarray:
@@ -458,6 +475,7 @@ class RVEMaterial:
         counts = _counts(state)
         self.n_points = len(counts)
         self.groups, self.rows = [], []
+        self._storage = {}
         capacity = state.get("rve_capacity")  # absent in checkpoints before it
         for n in np.unique(counts):
             rows = np.flatnonzero(counts == n)

@@ -139,6 +139,61 @@ def concatenate(batches: list[RVEBatch]) -> RVEBatch:
                        for f in fields(RVEBatch)})
 
 
+def remove_rves(b: RVEBatch, index) -> tuple[RVEBatch, np.ndarray]:
+    """`b` without the RVEs `index`, made in place: the last RVEs that stay are moved
+    into the slots of those removed (only they are copied), and the batch returned is a
+    view of the first R - k rows of b's arrays (b itself is left with its rows moved).
+    Where fewer than half of b's rows would stay, a compact copy is returned instead,
+    so that memory follows the batch. Returns (batch, order) with order[i] the index in
+    b of the returned batch's RVE i."""
+    gone = np.unique(np.asarray(index, np.int64))
+    keep = b.n_rve - gone.size
+    if keep < 0.5 * b.n_rve:
+        order = np.setdiff1d(np.arange(b.n_rve), gone)
+        return b.take(order), order
+    holes = gone[gone < keep]
+    movers = np.setdiff1d(np.arange(keep, b.n_rve), gone)  # as many as holes
+    order = np.arange(keep)
+    order[holes] = movers
+    for f in fields(RVEBatch):
+        a = getattr(b, f.name)
+        a[holes] = a[movers]
+    return RVEBatch(**{f.name: getattr(b, f.name)[:keep] for f in fields(RVEBatch)}), order
+
+
+GROWTH = 1.5  # spare rows a batch gets when RVEs are appended to it (extend)
+
+
+def extend(b: RVEBatch, new: list[RVEBatch], storage: RVEBatch | None = None
+           ) -> tuple[RVEBatch, RVEBatch]:
+    """The RVEs of b followed by those of `new` (same N; capacities grown to the
+    largest), as a view of the first rows of a storage batch with spare rows: appending
+    again writes into the spare rows while they last (no copy of b), and a full storage
+    is replaced by one GROWTH times the rows needed, so that a batch grown one RVE at a
+    time is copied O(log) times, not every time. `storage`: the batch b is a view of,
+    from the last call (ignored unless b's arrays all lie at its start). Returns
+    (batch, storage)."""
+    k = max(x.capacity for x in [b, *new])
+    grow_capacity(b, k)
+    new = [grow_capacity(x.copy(), k) for x in new]
+    r0, r1 = b.n_rve, b.n_rve + sum(x.n_rve for x in new)
+    names = [f.name for f in fields(RVEBatch)]
+    fits = (storage is not None and storage.n_rve >= r1 and storage.capacity == k
+            and all(getattr(b, f).base is getattr(storage, f) for f in names))
+    if not fits:
+        rows = max(r1, int(GROWTH * r1))
+        storage = RVEBatch(**{f: np.empty((rows, *getattr(b, f).shape[1:]),
+                                          getattr(b, f).dtype) for f in names})
+        for f in names:
+            getattr(storage, f)[:r0] = getattr(b, f)
+    at = r0
+    for x in new:
+        for f in names:
+            getattr(storage, f)[at:at + x.n_rve] = getattr(x, f)
+        at += x.n_rve
+    return RVEBatch(**{f: getattr(storage, f)[:r1] for f in names}), storage
+
+
 def grow_capacity(b: RVEBatch, capacity: int) -> RVEBatch:
     """Grow the neighbour capacity of `b` in place to `capacity`; lists and history kept."""
     r, n, k = b.nbr_j.shape
