@@ -2,7 +2,7 @@
 
     python studies/intrusion/friction_angle.py CASE.toml RUN --out phi.json
     python studies/intrusion/friction_angle.py CASE.toml --realisations 16 --out phi.json
-        [--strain-rate RATE]
+        [--strain-rate RATE] [--damping ALPHA]
 
 Drained triaxial compression of RVE packings (the case's [triaxial] table: confining
 pressure, rate, axial strain), one batch per loading axis (`--axes`, default x y z: the
@@ -14,6 +14,7 @@ Kang et al.'s law is written for. The peak of each path is reported beside it.
 `--strain-rate` replaces the table's rate [1/s]; the result gives the strain per DEM step
 it makes (rate x the DEM step), comparable with a quasi-static coupled run's
 `strain_per_substep` (docs/coupling.md), which loads its RVEs at that strain per step.
+`--damping` replaces the local damping of the test (the packings keep the recipe's).
 
 Which packings:
 - RUN: the ones the run used (RUN/packings/*.h5). A geostatic library's packings
@@ -138,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="axial strain where the steady window starts")
     ap.add_argument("--strain-rate", type=float, metavar="RATE",
                     help="1/s, instead of the [triaxial] table's")
+    ap.add_argument("--damping", type=float, metavar="ALPHA",
+                    help="local damping during the test, instead of [rve] damping (the "
+                         "packings are still prepared with the recipe's)")
     args = ap.parse_args(argv)
     if (args.run is None) == (args.realisations is None):
         ap.error("give either RUN or --realisations N")
@@ -157,6 +161,11 @@ def main(argv: list[str] | None = None) -> int:
     else:
         tested = run_packings(args.run)
         what = f"the {len(tested)} packings of {args.run}"
+    if args.damping is not None:
+        if not 0.0 <= args.damping < 1.0:
+            ap.error(f"--damping {args.damping}: valid 0 <= alpha < 1")
+        case = case.model_copy(update={"rve": case.rve.model_copy(
+            update={"damping": args.damping})})
     by_pressure: dict[float, list[int]] = {}
     for i, (_, level) in enumerate(tested):
         by_pressure.setdefault(level or case.triaxial.confining_pressure, []).append(i)
@@ -179,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         "peak_phi_per_packing_deg": [round(float(m), 2) for m in peak.mean(axis=1)],
         "method": f"drained triaxial along {' '.join(args.axes)}, mean mobilised angle for "
                   f"axial strain >= {args.start}; {what}",
-        "strain_rate": case.triaxial.strain_rate,
+        "strain_rate": case.triaxial.strain_rate, "damping": case.rve.damping,
         "strain_per_dem_step": float(f"{strain_per_step:.3g}"),
         "case": str(args.case), "packings": [p.name for p, _ in tested]}
     if len(by_pressure) > 1:
