@@ -78,3 +78,11 @@ def test_bad_strain_rate_is_refused_before_any_packing(tmp_path):
         fa.main([str(QUICK), "--realisations", "2", "--strain-rate", "0",
                  "--out", str(tmp_path / "phi.json")])
     assert not (tmp_path / "phi_packings").exists()
+
+
+def test_bad_damping_is_refused_before_any_packing(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        fa.main([str(QUICK), "--realisations", "2", "--damping", "1.0",
+                 "--out", str(tmp_path / "phi.json")])
+    assert "--damping 1.0: valid 0 <= alpha < 1" in capsys.readouterr().err
+    assert not (tmp_path / "phi_packings").exists()

@@ -154,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         if not 0.0 < args.strain_rate <= 100.0:
             ap.error(f"--strain-rate {args.strain_rate}: valid 0 < rate <= 100 1/s")
         case.triaxial.strain_rate = args.strain_rate
+    if args.damping is not None and not 0.0 <= args.damping < 1.0:
+        ap.error(f"--damping {args.damping}: valid 0 <= alpha < 1")
     if args.realisations is not None:
         folder = args.out.with_name(f"{args.out.stem}_packings")
         tested = [(p, None) for p in realisations(case, args.realisations, folder)]
@@ -161,9 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         tested = run_packings(args.run)
         what = f"the {len(tested)} packings of {args.run}"
-    if args.damping is not None:
-        if not 0.0 <= args.damping < 1.0:
-            ap.error(f"--damping {args.damping}: valid 0 <= alpha < 1")
+    if args.damping is not None:  # the test's damping; the packings keep the recipe's
         case = case.model_copy(update={"rve": case.rve.model_copy(
             update={"damping": args.damping})})
     by_pressure: dict[float, list[int]] = {}
