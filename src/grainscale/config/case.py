@@ -304,7 +304,8 @@ class DEMMaterialCfg(StrictModel):
     time_integration: Literal["dynamic", "quasi_static"] = "dynamic"
     # dynamic RVEs live in real time, where [rve] damping is an artificial viscosity: it
     # defaults to 0 for them and a value above 0 is refused unless allowed here (a
-    # quasi-static load, like the unit element's, where it is harmless)
+    # slow load, like the unit element's, compared with a pure-DEM test of the same
+    # damping; it still lends strength in proportion to the rate, docs/coupling.md)
     allow_rve_damping: bool = False
     min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
     strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
@@ -718,8 +719,8 @@ def check_case(case: Case) -> None:
                         f"rve.damping = {case.rve.damping} with materials.{name}."
                         "time_integration = 'dynamic': in a real-time RVE local damping "
                         "acts as an artificial viscosity (docs/coupling.md); valid: 0, or "
-                        f"set materials.{name}.allow_rve_damping = true for a quasi-static "
-                        "load where it is harmless")
+                        f"set materials.{name}.allow_rve_damping = true for a slow load "
+                        "(it lends strength in proportion to the rate)")
     for i, b in enumerate(case.bodies):
         if b.material not in case.materials:
             raise ConfigError(f"bodies[{i}].material = {b.material!r}: no such material; "
