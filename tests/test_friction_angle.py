@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from example_scripts import load_example
+from example_scripts import STUDIES, load_example
 
 fa = load_example("intrusion/friction_angle.py")
 
@@ -86,3 +86,21 @@ def test_bad_damping_is_refused_before_any_packing(tmp_path, capsys):
                  "--out", str(tmp_path / "phi.json")])
     assert "--damping 1.0: valid 0 <= alpha < 1" in capsys.readouterr().err
     assert not (tmp_path / "phi_packings").exists()
+
+
+def test_loading_table_pairs_the_packings(capsys):
+    """loading_table.py on the committed loading results: the change of a loading from
+    the slow reference is the mean of the per-packing differences (checked against the
+    files' own per-packing angles), and results of other packings are refused."""
+    lt = load_example("intrusion/loading_table.py")
+    data = STUDIES / "intrusion" / "data" / "loading"
+    ref = json.loads((data / "d0.2_r0.03.json").read_text())
+    today = json.loads((data / "d0.2_r0.32.json").read_text())
+    assert lt.main([str(data / "d0.2_r0.03.json"), str(data / "d0.2_r0.32.json")]) == 0
+    rows = json.loads(capsys.readouterr().out.splitlines()[-1])
+    want = np.mean(np.subtract(today["phi_per_packing_deg"], ref["phi_per_packing_deg"]))
+    assert rows[1]["phi_change"][0] == pytest.approx(want, abs=1e-12)
+    assert rows[0]["within"] and not rows[1]["within"]  # +0.65 deg: beyond 0.3
+    other = dict(today, packings=["x.h5"] * len(today["packings"]))
+    with pytest.raises(SystemExit, match="different packings"):
+        lt.paired(ref, other, "phi")
