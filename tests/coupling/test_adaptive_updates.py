@@ -61,22 +61,23 @@ def test_a_tolerance_that_defers_nothing_is_bitwise_every_step(packing):
 
 def test_deferred_increments_reach_the_dem_whole_and_the_stress_stays_within_the_bound(
         packing):
-    """Increments of 1e-5 per component against a tolerance of 5e-5: each RVE waits
-    until its composed increment reaches it, then takes it in one update whose cell ends
-    exactly at prod(I + dH) h0 (1e-13, round-off of the products). While it waits its
-    stress (the last update's; no spin here beyond the random one's few 1e-5 rad) stays
-    within the documented bound of the stress of the same RVE stepped every MPM step:
-    the tangent modulus times the tolerance, the tangent at most the affine max_k M_k
-    (measured 0.77 of the bound). Far fewer DEM updates, and no more DEM steps than
-    stepping every MPM step."""
-    tol = 5e-5
-    ref, ada = material(packing), material(packing, update_tolerance=tol,
-                                           max_deferred_steps=1000)
+    """Increments of 3e-6 per component against a tolerance of 1e-5 (= the strain per
+    DEM step here, its largest value): each RVE waits until its composed increment
+    reaches it, then takes it in one update whose cell ends exactly at prod(I + dH) h0
+    (1e-13, round-off of the products). While it waits its stress (the last update's; no
+    spin beyond the random one's few 1e-6 rad) stays within the documented bound of the
+    stress of the same RVE stepped every MPM step: the tangent modulus times the
+    tolerance, the tangent at most the affine max_k M_k (measured 0.91 of the bound).
+    Far fewer DEM updates, and no more DEM steps than stepping every MPM step."""
+    tol = 1e-5
+    ref = material(packing, strain_per_substep=tol)
+    ada = material(packing, strain_per_substep=tol, update_tolerance=tol,
+                   max_deferred_steps=1000)
     s_ref, s_ada = ref.initial_stress(), ada.initial_stress()
     h0 = ada.batch.h.copy()
     total = np.tile(np.eye(3), (3, 1, 1))
     worst = 0.0
-    steps = increments(30)
+    steps = increments(30, size=3e-6)
     for dH in steps:
         total = np.einsum("pab,pbc->pac", np.eye(3) + dH, total)
         ref.update(dH, 1e-3, s_ref)
@@ -99,15 +100,16 @@ def test_deferred_increments_reach_the_dem_whole_and_the_stress_stays_within_the
 
 
 def test_a_waiting_rve_turns_its_stress_with_the_accumulated_spin(packing):
-    """A point spun by 3e-5 rad per MPM step about a skew axis (tolerance 1e-3, so it
-    waits), after an axial preload that makes its stress anisotropic: while waiting its
-    stress is R sigma R^T exactly (1e-12 of p); when the bound on deferred steps (20)
-    makes it update, its DEM, turned by the whole rotation at once, gives the stress of
-    the same RVE turned step by step (tolerance 0) within the grains' jiggle (1e-3 p, as
-    in test_rve_material's rotation test; both relax alike from the preload over the
-    same ~300 DEM steps)."""
-    ada = material(packing, n=1, update_tolerance=1e-3, max_deferred_steps=20)
-    ref = material(packing, n=1)
+    """A point spun by 4e-6 rad per MPM step about a skew axis (tolerance 1e-4 = the
+    strain per DEM step here, so it waits), after an axial preload that makes its stress
+    anisotropic: while waiting its stress is R sigma R^T exactly (1e-12 of p); when the
+    bound on deferred steps (20) makes it update, its DEM takes the composed rotation in
+    one increment and gives what the same RVE gives when handed the whole rotation
+    R(20 x 4e-6) - I at once (1e-9 of p: the composed and the direct rotation differ at
+    round-off only)."""
+    kw = {"n": 1, "strain_per_substep": 1e-4}
+    ada = material(packing, update_tolerance=1e-4, max_deferred_steps=20, **kw)
+    ref = material(packing, **kw)
     s_ada, s_ref = ada.initial_stress(), ref.initial_stress()
     preload = np.zeros((1, 3, 3))
     preload[0, 2, 2] = -1e-3  # > tolerance: updated every step
@@ -118,30 +120,30 @@ def test_a_waiting_rve_turns_its_stress_with_the_accumulated_spin(packing):
     before = s_ada[0].copy()
     p = homogenise.mean_stress(before)
     assert homogenise.deviatoric_stress(before) > 0.1 * p
-    dH = (rotation([1.0, 2.0, 3.0], 3e-5) - np.eye(3))[None]
+    dH = (rotation([1.0, 2.0, 3.0], 4e-6) - np.eye(3))[None]
     for k in range(1, 20):
         ada.update(dH, 1e-3, s_ada)
-        ref.update(dH, 1e-3, s_ref)
         assert ada.deferred[0] == k
-        r = rotation([1.0, 2.0, 3.0], 3e-5 * k)
+        r = rotation([1.0, 2.0, 3.0], 4e-6 * k)
         np.testing.assert_allclose(s_ada[0], r @ before @ r.T, rtol=0, atol=1e-12 * p)
     steps_before = ada.rve_steps
     ada.update(dH, 1e-3, s_ada)  # the 20th: stepped, whatever its increment
-    ref.update(dH, 1e-3, s_ref)
-    assert ada.deferred[0] == 0 and ada.rve_steps > steps_before
-    np.testing.assert_allclose(s_ada[0], s_ref[0], rtol=0, atol=1e-3 * p)
+    assert ada.deferred[0] == 0 and ada.rve_steps == steps_before + 1
+    whole = (rotation([1.0, 2.0, 3.0], 4e-6 * 20) - np.eye(3))[None]
+    ref.update(whole, 20e-3, s_ref)
+    np.testing.assert_allclose(s_ada[0], s_ref[0], rtol=0, atol=1e-9 * p)
 
 
 def test_deferred_increments_survive_a_state_round_trip(packing):
     """state() and load_state carry the composed increments, the deferred counts and
     times: a material restored mid-deferral goes on bitwise as the original."""
-    a = material(packing, update_tolerance=5e-5)
+    a = material(packing, strain_per_substep=5e-5, update_tolerance=5e-5)
     s_a = a.initial_stress()
-    steps = increments(8)
+    steps = increments(8, size=1e-5)
     for dH in steps[:4]:
         a.update(dH, 1e-3, s_a)
     assert (a.deferred > 0).any() and np.abs(a.H_acc).max() > 0
-    b = material(packing, update_tolerance=5e-5)
+    b = material(packing, strain_per_substep=5e-5, update_tolerance=5e-5)
     b.load_state({k: np.copy(v) for k, v in a.state().items()})
     s_b = s_a.copy()
     for dH in steps[4:]:
@@ -162,7 +164,17 @@ def test_adaptive_updates_need_quasi_static_rves(packing, tmp_path):
     text = open(__file__.replace("tests/coupling/test_adaptive_updates.py",
                                  "examples/unit_element/case.toml")).read()
     case.write_text(text.replace('time_integration = "dynamic"',
-                                 'time_integration = "dynamic"\nupdate_tolerance = 1e-5'))
-    with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 1e-05.*"
+                                 'time_integration = "dynamic"\nupdate_tolerance = 1e-6'))
+    with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 1e-06.*"
                                           r"valid: 0, or time_integration = 'quasi_static'"):
         load_case(case)
+    # above one DEM step's strain: refused (a longer lag feeds oscillations)
+    case.write_text(text.replace('time_integration = "dynamic"',
+                                 'time_integration = "quasi_static"\n'
+                                 'update_tolerance = 1e-5'))
+    with pytest.raises(ConfigError, match=r"update_tolerance = 1e-05: above "
+                                          r"strain_per_substep = 2e-06; valid: 0 to"):
+        load_case(case)
+    with pytest.raises(ValueError, match="valid 0 to strain_per_substep"):
+        RVEMaterial("sand", params, [pack], n_points=1, mode="quasi_static",
+                    update_tolerance=1e-5)

@@ -374,15 +374,15 @@ def test_retiled_rves_are_rank_independent_and_restart(rve_case, serial_out, tmp
 @pytest.mark.validation  # 13 s; the material-level tests are in the fast tier
 def test_adaptive_updates_are_rank_thread_independent_and_resume_bitwise(rve_case, tmp_path):
     """The small unit element with quasi-static RVEs from 4 packings and adaptive
-    updates (tolerance 1e-4, at most 3 deferred steps), so that RVEs wait or step
-    depending on their own increments: one history.csv, to the byte, on 1 rank with 1
-    and 2 threads, on 2 ranks with rebalancing every 5 steps, and on 3 ranks stopped at
-    step 9 (deferred increments in the checkpoint) and resumed on 2. cost.json says that
-    RVEs did wait."""
+    updates (tolerance 1e-4 = the strain per DEM step, at most 3 deferred steps), so
+    that RVEs wait or step depending on their own increments: one history.csv, to the
+    byte, on 1 rank with 1 and 2 threads, on 2 ranks with rebalancing every 5 steps,
+    and on 3 ranks stopped at step 9 (deferred increments in the checkpoint) and
+    resumed on 2. cost.json says that RVEs did wait."""
     case = tomllib.loads(rve_case.read_text())
     case["materials"]["sand"].update(time_integration="quasi_static",
-                                     allow_rve_damping=True, update_tolerance=1e-4,
-                                     max_deferred_steps=3)
+                                     allow_rve_damping=True, strain_per_substep=1e-4,
+                                     update_tolerance=1e-4, max_deferred_steps=3)
     case["solver"]["rebalance_every"] = 5
     path = tmp_path / "adaptive.toml"
     path.write_text(tomli_w.dumps(case))

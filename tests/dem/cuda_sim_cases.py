@@ -114,8 +114,8 @@ def adaptive_unit_element(folder: Path) -> Path:
     most 2 deferred steps): some MPM steps leave the RVE unstepped on the device."""
     case = tomllib.loads(unit_element(folder).read_text())
     case["materials"]["sand"].update(time_integration="quasi_static",
-                                     allow_rve_damping=True, update_tolerance=4e-5,
-                                     max_deferred_steps=2)
+                                     allow_rve_damping=True, strain_per_substep=4e-5,
+                                     update_tolerance=4e-5, max_deferred_steps=2)
     path = folder / "adaptive_unit_element.toml"
     path.write_text(tomli_w.dumps(case))
     return path

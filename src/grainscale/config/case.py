@@ -309,9 +309,10 @@ class DEMMaterialCfg(StrictModel):
     allow_rve_damping: bool = False
     min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
     strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
-    # adaptive updates (quasi_static only): an RVE whose accumulated increment since its
-    # last DEM update (max |F_acc - I|) is below this is not stepped, its stress the last
-    # one rotated with the accumulated spin (docs/coupling.md); 0: every RVE every step
+    # adaptive updates (quasi_static only; at most strain_per_substep): an RVE whose
+    # accumulated increment since its last DEM update (max |H_acc|) is below this is not
+    # stepped, its stress the last one rotated with the accumulated spin
+    # (docs/coupling.md); 0: every RVE every step
     update_tolerance: Annotated[float, Field(ge=0, le=1e-2)] = 0.0
     # ... and is stepped at least every this many MPM steps whatever its increment
     max_deferred_steps: Annotated[int, Field(ge=1, le=10_000)] = 20
@@ -702,6 +703,14 @@ def check_case(case: Case) -> None:
                                   f"a stress (solver.gravity = {list(case.solver.gravity)})")
     dynamic = [n for n, m in case.materials.items()
                if m.type == "dem" and m.time_integration == "dynamic"]
+    for name, m in case.materials.items():
+        if m.type == "dem" and m.update_tolerance > m.strain_per_substep:
+            raise ConfigError(
+                f"materials.{name}.update_tolerance = {m.update_tolerance}: above "
+                f"strain_per_substep = {m.strain_per_substep}; valid: 0 to "
+                "strain_per_substep (a waiting RVE's stress lags its strain, and a lag of "
+                "more than one DEM step's strain feeds energy into oscillations: "
+                "docs/coupling.md)")
     for name in dynamic:
         if case.materials[name].update_tolerance > 0:
             raise ConfigError(

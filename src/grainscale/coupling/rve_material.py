@@ -101,6 +101,9 @@ class RVEMaterial:
         if update_tolerance > 0 and mode != "quasi_static":
             raise ValueError(f"update_tolerance = {update_tolerance}: adaptive updates need "
                              "mode 'quasi_static'")
+        if update_tolerance > strain_per_substep:
+            raise ValueError(f"update_tolerance = {update_tolerance}: valid 0 to "
+                             f"strain_per_substep = {strain_per_substep} (docs/coupling.md)")
         if not update_tolerance >= 0 or max_deferred_steps < 1:
             raise ValueError(f"update_tolerance = {update_tolerance}, max_deferred_steps = "
                              f"{max_deferred_steps}: valid >= 0 and >= 1")
