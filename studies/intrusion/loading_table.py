@@ -1,6 +1,6 @@
 """The RVE's friction angles under several quasi-static loadings, against a slow reference.
 
-    python studies/intrusion/loading_table.py REF.json OTHER.json ... [--markdown]
+    python studies/intrusion/loading_table.py REF.json OTHER.json ... [--limit 0.3]
 
 Each file is a `friction_angle.py --realisations N` result (phi.json) of the same
 packings (the same case and N: its `packings` and seeds) at some `--strain-rate` and
@@ -24,9 +24,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from friction_angle import summary  # noqa: E402
 
 
+def _packings(r: dict) -> tuple:
+    """What identifies the packings a result tested: the files, the case, and the
+    method's last clause (how many of which recipe, with which seeds)."""
+    return r["packings"], r.get("case"), r.get("method", "").split(";")[-1]
+
+
 def paired(ref: dict, other: dict, key: str) -> tuple[float, float]:
     """Mean and 95 % band of other - ref over the packings (the same packings)."""
-    if ref["packings"] != other["packings"]:
+    if _packings(ref) != _packings(other):
         raise SystemExit("the results test different packings: pair only runs of one "
                          "case with the same --realisations")
     a = np.asarray(ref[f"{key}_per_packing_deg"])
@@ -44,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     ref = runs[0]
     rows = []
     print("| strain per DEM step | rate (1/s) | damping | steady phi (deg) | change | "
-          "peak phi (deg) | change | within the limit |")
+          f"peak phi (deg) | change | both means within {args.limit:g} deg |")
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     for r in runs:
         steady = paired(ref, r, "phi")

@@ -156,6 +156,8 @@ def test_column_features_are_rank_and_thread_independent(tmp_path):
     r = mpirun(2, ["run", str(case), "--out", str(out), "--quiet"])
     assert r.returncode == 0, r.stderr
     assert (out / "history.csv").read_text() == history, "2 ranks differ"
+    # rebalancing rebuilt the materials: the cost report's sums went with them
+    assert json.loads((out / "cost.json").read_text())["fraction_of_rves_stepped"] == 1.0
     out = fresh("ranks3")
     assert interrupted_history(case, out, first=3, steps=60, then=2) == history
     assert json.loads((out / "cost.json").read_text())["rebalances"] >= 2

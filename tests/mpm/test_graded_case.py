@@ -304,3 +304,23 @@ def test_a_nodes_mass_threshold_is_a_point_of_its_own_cells():
     m = 1000.0 * 0.05**3
     np.testing.assert_allclose(ref[1], m, rtol=1e-12)  # z = 0.1: cells of 0.1 m around
     np.testing.assert_allclose(ref[2], 2 * m, rtol=1e-12)  # z = 0.2: a 0.2 m cell above
+
+
+def test_a_traction_on_file_points_whose_cell_cut_their_domain_uses_their_volume(tmp_path):
+    """A file point whose cube (V0^(1/3) = 0.1 m) its 0.05 m cell cut along z carries
+    V0^(2/3) on a z face, as it would on a uniform grid, not V0 / (2 l_z) (twice that):
+    only a sub-cell box (V0 = 8 lx ly lz) is loaded on its face."""
+    (tmp_path / "pts.txt").write_text("0.05 0.05 0.025 0.001\n")
+    rest = REST.replace('shape = "box"\nlo = [0.0, 0.0, 0.0]\nhi = [0.4, 0.2, 1.0]\n'
+                        'points_per_cell = 2\n', 'shape = "file"\npath = "pts.txt"\n')
+    rest += textwrap.dedent("""
+        [[tractions]]
+        lo = [0.0, 0.0, 0.0]
+        hi = [0.1, 0.1, 0.05]
+        surface = "z-"
+        traction = [0.0, 0.0, 1e3]
+        area = "initial"
+        """)
+    s = build_state(_case(tmp_path, GRADED, rest), tmp_path)
+    assert s.points.lp[0, 2] == pytest.approx(0.025)
+    np.testing.assert_allclose(s.tractions[0].force[0], [0.0, 0.0, 1e3 * 0.01], rtol=1e-12)

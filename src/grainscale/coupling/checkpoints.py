@@ -342,7 +342,8 @@ def changed_keys(old: dict, new: dict) -> list[tuple[str, object, object]]:
     return [(k, a.get(k, _ABSENT), b.get(k, _ABSENT)) for k in dict.fromkeys([*b, *a])
             if a.get(k, _ABSENT) != b.get(k, _ABSENT)
             and not any(_covers(f, k) for f in FREE)
-            and not (k not in a and k.rsplit(".", 1)[-1] in ADDED
+            and not (k not in a and k.startswith("materials.")
+                     and k.rsplit(".", 1)[-1] in ADDED
                      and b[k] == ADDED[k.rsplit(".", 1)[-1]])]
 
 

@@ -99,14 +99,14 @@ class RVEMaterial:
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         if update_tolerance > 0 and mode != "quasi_static":
-            raise ValueError(f"update_tolerance = {update_tolerance}: adaptive updates need "
-                             "mode 'quasi_static'")
-        if update_tolerance > strain_per_substep:
+            raise ValueError(f"update_tolerance = {update_tolerance} with mode {mode!r}: "
+                             "adaptive updates need mode 'quasi_static'; valid with "
+                             f"{mode!r}: 0")
+        if not 0 <= update_tolerance <= strain_per_substep:
             raise ValueError(f"update_tolerance = {update_tolerance}: valid 0 to "
                              f"strain_per_substep = {strain_per_substep} (docs/coupling.md)")
-        if not update_tolerance >= 0 or max_deferred_steps < 1:
-            raise ValueError(f"update_tolerance = {update_tolerance}, max_deferred_steps = "
-                             f"{max_deferred_steps}: valid >= 0 and >= 1")
+        if max_deferred_steps < 1:
+            raise ValueError(f"max_deferred_steps = {max_deferred_steps}: valid >= 1")
         self.update_tolerance = float(update_tolerance)
         self.max_deferred_steps = int(max_deferred_steps)
         engine.check_device(device)
@@ -251,8 +251,8 @@ class RVEMaterial:
         (I + H_acc) h, as if it had followed every step) over
         ceil(max |H_acc| / strain_per_substep) DEM steps. Meanwhile its stress is the
         last update's rotated with the accumulated spin, R sym(sigma) R^T with
-        I + H_acc = R U (objective; docs/coupling.md: the error is the tangent modulus
-        times the tolerance at most, and does not accumulate).
+        I + H_acc = R U (objective; docs/coupling.md: the error is of the order of the
+        affine modulus times the tolerance, and does not accumulate).
         """
         if not self.groups:
             return
@@ -402,6 +402,10 @@ class RVEMaterial:
                 rows = np.concatenate([rows, [r for _, r in new]])
             self.groups.append(batch)
             self.rows.append(rows)
+        # keep a storage only while its group still lies in it (memory follows the RVEs)
+        self._storage = {b.n_particles: self._storage[b.n_particles] for b in self.groups
+                         if b.n_particles in self._storage
+                         and b.s.base is self._storage[b.n_particles].s}
         self._forget_devices()
 
     def _thin(self, batch: RVEBatch, widths: np.ndarray) -> np.ndarray:
@@ -464,13 +468,13 @@ class RVEMaterial:
         out = {f"rve_{k}": v for k, v in arrays.items()}
         out["rve_particles"] = counts
         out["rve_capacity"] = capacity
-        out["theta_prev"] = self.theta_prev
-        out["spin_rate"] = self.spin_rate
+        out["theta_prev"] = self.theta_prev.copy()  # copies: updated in place later
+        out["spin_rate"] = self.spin_rate.copy()
         out["assignment"] = self.assignment
         out["work"] = self.work
-        out["H_acc"] = self.H_acc
-        out["deferred"] = self.deferred
-        out["t_acc"] = self.t_acc
+        out["H_acc"] = self.H_acc.copy()
+        out["deferred"] = self.deferred.copy()
+        out["t_acc"] = self.t_acc.copy()
         return out
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
@@ -515,7 +519,7 @@ class RVEMaterial:
             "porosity": self._per_point(lambda b: b.porosity()),
             "coordination": self._per_point(homogenise.coordination),
             "mean_rotation": self.theta_prev.copy(),  # the last update's (or loaded)
-            "rotation_rate": self.spin_rate,
+            "rotation_rate": self.spin_rate.copy(),
             "rve_eps_v": self._per_point(homogenise.volumetric_strain),
             "rve_particles": self.particle_counts().astype(float),
             "rve_steps": self._per_point(lambda b: b.step_count).astype(float),

@@ -197,15 +197,17 @@ def make_traction(x: np.ndarray, vol0: np.ndarray, lo, hi, traction, surface: st
     """Traction t [Pa] on the points whose centres lie in [lo, hi], on their `surface`
     side ('x+', 'z-', ...): force = t * A0, with A0 [m^2] the face of the point's domain
     across the surface's normal n, V0 / (2 l_n) for a box of half-widths lp (P,3) (a
-    graded grid's sub-cell: the points of a face then add up to its area exactly), and
-    V0^(2/3) for a cube or lp None (the same area, in the digits uniform grids have
-    always used); times the Nanson area ratio if current."""
+    graded grid's sub-cell, V0 = 8 lx ly lz: the points of a face then add up to its area
+    exactly), and V0^(2/3) otherwise (a cube, a file point whose domain its cell cut, lp
+    None: the digits uniform grids have always used); times the Nanson area ratio if
+    current."""
     sel = np.flatnonzero(np.all((x >= np.asarray(lo)) & (x <= np.asarray(hi)), axis=1))
     axis, side = FACES[surface]
     area = np.cbrt(vol0[sel]) ** 2
-    if lp is not None:
+    if lp is not None:  # a box that is the point's sub-cell (V0 = 8 lx ly lz): its face
         l = np.asarray(lp)[sel]
-        box = (l[:, 0] != l[:, 1]) | (l[:, 1] != l[:, 2])
+        box = (((l[:, 0] != l[:, 1]) | (l[:, 1] != l[:, 2]))
+               & np.isclose(8.0 * l.prod(axis=1), vol0[sel], rtol=1e-9, atol=0.0))
         area[box] = vol0[sel][box] / (2.0 * l[box, axis])
     force = area[:, None] * np.asarray(traction, dtype=np.float64)[None, :]
     normal = np.zeros(3)

@@ -164,6 +164,10 @@ def evaluate(x: np.ndarray, lp: np.ndarray, axes, gimp: bool = True, out=None, n
     base, w, dw = out
     if w.shape[2] < max(ns):
         raise ValueError(f"out: {w.shape[2]} slots per axis, the stencil needs {max(ns)}")
+    for a in range(3):
+        if not 2 <= ns[a] <= len(axes[a]):
+            raise ValueError(f"ns[{a}] = {int(ns[a])}: valid 2 to the axis' {len(axes[a])} "
+                             "nodes")
     for a in range(3):  # each axis written in place through strided views
         weights_1d(np.asarray(axes[a], dtype=np.float64), x[:, a], l[:, a], int(ns[a]),
                    base[:, a], w[:, a], dw[:, a])
