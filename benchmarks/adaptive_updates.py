@@ -28,14 +28,19 @@ from grainscale.analysis import read_columns
 
 
 def run(case_path: str, steps: int, tolerance: float, deferred: int, out: Path,
-        threads: int | None) -> dict:
-    """One run of the case's first `steps` MPM steps; its figures, also written to
-    out/adaptive.json."""
+        threads: int | None, strain: float | None = None, damping: float | None = None
+        ) -> dict:
+    """One run of the case's first `steps` MPM steps (with `strain` per DEM step and the
+    RVE's local `damping` where given); its figures, also written to out/adaptive.json."""
     case = gs.load_case(case_path)
+    if damping is not None:
+        case.rve.damping = damping
     dem = [name for name, m in case.materials.items() if m.type == "dem"]
     if not dem:
         raise SystemExit(f"{case_path}: no dem material")
     for name in dem:
+        if strain is not None:
+            case.materials[name].strain_per_substep = strain
         case.materials[name].update_tolerance = tolerance
         case.materials[name].max_deferred_steps = deferred
     t0 = time.perf_counter()
@@ -45,6 +50,8 @@ def run(case_path: str, steps: int, tolerance: float, deferred: int, out: Path,
     hist = read_columns(out / "history.csv")
     last = {k: float(v[-1]) for k, v in hist.items()}
     res = {"case": case_path, "steps": cost["steps"], "tolerance": tolerance,
+           "strain_per_substep": case.materials[dem[0]].strain_per_substep,
+           "rve_damping": case.rve.damping,
            "max_deferred_steps": deferred, "wall_seconds": wall, "threads": cost["threads"],
            "dem_steps_per_rve_per_step": cost["dem_steps_per_rve_per_step"],
            "fraction_of_rves_stepped": cost["fraction_of_rves_stepped"],
@@ -70,7 +77,9 @@ def compare(outs: list[Path]) -> list[dict]:
             row["force"] = r["last_row"]["force"]
             row["force_change"] = r["last_row"]["force"] / ref["last_row"]["force"] - 1.0
         rows.append(row)
-        print(f"tolerance {r['tolerance']:g}: {r['dem_steps_per_rve_per_step']:.3f} DEM steps "
+        print(f"tolerance {r['tolerance']:g}, {r.get('strain_per_substep', 2e-6):g} per DEM "
+              f"step, damping {r.get('rve_damping', 0.2):g}: "
+              f"{r['dem_steps_per_rve_per_step']:.3f} DEM steps "
               f"per RVE and MPM step ({row['dem_steps_ratio']:.2f}x fewer), "
               f"{100 * r['fraction_of_rves_stepped']:.1f} % of RVEs stepped, wall "
               f"{r['wall_seconds']:.0f} s ({row['wall_ratio']:.2f}x)"
@@ -86,6 +95,8 @@ def main() -> None:
     ap.add_argument("--tolerance", type=float, default=0.0, help="update_tolerance")
     ap.add_argument("--max-deferred", type=int, default=20, help="max_deferred_steps")
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--strain-per-substep", type=float, help="instead of the case's")
+    ap.add_argument("--rve-damping", type=float, help="[rve] damping instead of the case's")
     ap.add_argument("--out", type=Path, help="the run's folder")
     ap.add_argument("--compare", type=Path, nargs="+", help="outputs of earlier runs")
     args = ap.parse_args()
@@ -97,7 +108,7 @@ def main() -> None:
     if args.steps < 1:
         raise SystemExit(f"--steps {args.steps}: valid >= 1")
     res = run(args.case, args.steps, args.tolerance, args.max_deferred, args.out,
-              args.threads)
+              args.threads, args.strain_per_substep, args.rve_damping)
     res["out"] = str(args.out)
     (args.out / "adaptive.json").write_text(json.dumps(res, indent=1))
     print(json.dumps(res))
