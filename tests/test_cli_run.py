@@ -228,3 +228,26 @@ def test_history_has_the_normalised_resistance(tmp_path):
     np.testing.assert_allclose(col["depth_over_R"], col["depth"] / R, rtol=1e-12)
     np.testing.assert_allclose(col["force_normalized"],
                                col["force"] / (0.01 * 1000.0 * 9.81 * R), rtol=1e-12)
+
+
+def test_more_threads_than_numba_started_with_are_named(capsys):
+    """--threads beyond NUMBA_NUM_THREADS runs with what numba has, and says so."""
+    from pathlib import Path
+
+    import numba
+
+    from grainscale.config.case import load_case
+    from grainscale.coupling.driver import set_threads
+    from grainscale.distributed.comm import Comm
+
+    case = load_case(Path(__file__).resolve().parents[1] / "examples" / "intrusion"
+                     / "mohr_coulomb.toml")
+    most = numba.config.NUMBA_NUM_THREADS
+    before = numba.get_num_threads()
+    try:
+        set_threads(case, most + 3, Comm())
+        assert numba.get_num_threads() == most
+    finally:
+        numba.set_num_threads(before)
+    err = capsys.readouterr().err
+    assert f"{most + 3} threads asked" in err and f"NUMBA_NUM_THREADS = {most}" in err

@@ -132,7 +132,12 @@ def set_threads(case: Case, threads: int | None, comm: Comm) -> None:
     if not n and comm.size > 1 and "NUMBA_NUM_THREADS" not in os.environ:
         n = max(1, len(os.sched_getaffinity(0)) // comm.node_ranks())
     if n:
-        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+        most = numba.config.NUMBA_NUM_THREADS  # fixed when numba started
+        if n > most and comm.rank == 0:
+            print(f"warning: {n} threads asked (--threads or solver.threads), but numba "
+                  f"started with NUMBA_NUM_THREADS = {most}: running {most}; set "
+                  f"NUMBA_NUM_THREADS={n} in the environment to use {n}", file=sys.stderr)
+        numba.set_num_threads(min(n, most))
 
 
 def prepare_materials(case: Case, case_dir: Path, out: Path, comm: Comm, progress: bool):
