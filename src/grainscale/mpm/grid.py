@@ -225,14 +225,15 @@ class Grid:
             dual.append(np.maximum(np.concatenate([h[:1], h]), np.concatenate([h, h[-1:]])))
         return (dual[2][:, None, None] * dual[1][None, :, None] * dual[0][None, None, :]).ravel()
 
-    def cell_volume_at(self, x: np.ndarray) -> np.ndarray:
-        """(P,) m^3: the volume of the grid cell holding each position x (P,3) (a
-        position on a node counts in the cell above it; clamped to the grid)."""
-        v = np.ones(len(x))
+    def cell_sizes_at(self, x: np.ndarray) -> np.ndarray:
+        """(P,3) m: the edges of the grid cell holding each position x (P,3) (a position
+        on a node counts in the cell above it; clamped to the grid)."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1, 3)
+        out = np.empty(x.shape)
         for a, X in enumerate(self.node_axes()):
             c = np.clip(np.searchsorted(X, x[:, a], side="right") - 1, 0, len(X) - 2)
-            v *= np.diff(X)[c]
-        return v
+            out[:, a] = np.diff(X)[c]
+        return out
 
     @property
     def cell_max(self) -> np.ndarray:

@@ -135,12 +135,7 @@ def sub_cell_half_widths(grid: Grid, x: np.ndarray, n: int) -> np.ndarray:
     x = np.asarray(x, dtype=np.float64).reshape(-1, 3)
     if grid.axes is None:
         return np.tile(0.5 * grid.cell_size / n, (x.shape[0], 1))
-    out = np.empty(x.shape)
-    for a in range(3):
-        X = np.asarray(grid.axes[a])
-        c = np.clip(np.searchsorted(X, x[:, a], side="right") - 1, 0, len(X) - 2)
-        out[:, a] = 0.5 * np.diff(X)[c] / n
-    return out
+    return 0.5 * grid.cell_sizes_at(x) / n
 
 
 def fill_box(grid: Grid, lo, hi, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -111,8 +111,8 @@ class MPMState:
         if self.grid.axes is None:
             self.m_point_ref = mmax
         else:
-            ratio = (float((self.points.m / self.grid.cell_volume_at(self.points.x0)).max())
-                     if P else 0.0)
+            cells = self.grid.cell_sizes_at(self.points.x0).prod(axis=1)
+            ratio = float((self.points.m / cells).max()) if P else 0.0
             self.m_point_ref = float(self.comm.max([ratio])[0]) * self.grid.node_volume
         self.mass_tol = MASS_TOL * self.m_point_ref
         self.contact_loads = None
