@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from grainscale.config.rve import RVEParams
-from grainscale.coupling.rve_material import RVEMaterial, affine_tangent
+from grainscale.coupling.predictor import affine_tangent, polar_rotation, predicted_stress
+from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.dem import homogenise
 from grainscale.dem.generate import generate
 
@@ -81,6 +82,31 @@ def test_the_predictor_is_the_affine_stiffness_of_the_contact_network(ratio):
     want = np.einsum("abcd,cd->ab", c, eps)
     got = affine_tangent(np.einsum("aabb->ab", c)[None], ratio, eps[None])[0]
     assert np.abs(got - want).max() > 1e-3 * np.abs(want).max()
+
+
+@pytest.mark.parametrize("size", [1e-6, 1e-3, 0.3])
+def test_predicted_stress_is_the_polar_decomposition_formula(size):
+    """predicted_stress (Newton's polar iteration, compiled) against the same formula
+    evaluated independently with numpy's SVD, R = W V^T and U = V S V^T of
+    I + H = W S V^T, for 20 random increments of each size (a waiting RVE's are below
+    the tolerance; 0.3 shows the iteration converges far from the identity): equal to
+    1e-10 of the largest stress component (round-off of U - I, ~1e-16, times moduli
+    ~1e6 times the stress scale)."""
+    rng = np.random.default_rng(5)
+    h = rng.uniform(-size, size, (20, 3, 3))
+    stress = rng.normal(size=(20, 3, 3)) * 1e3
+    moduli = rng.uniform(1e5, 1e6, (20, 3, 3))
+    moduli = 0.5 * (moduli + np.swapaxes(moduli, 1, 2))
+    w, sv, vt = np.linalg.svd(np.eye(3) + h)
+    rot = w @ vt
+    stretch = np.einsum("pka,pk,pkb->pab", vt, sv - 1.0, vt)
+    sym = 0.5 * (stress + np.swapaxes(stress, 1, 2))
+    want = rot @ (sym + affine_tangent(moduli, 0.4, stretch)) @ np.swapaxes(rot, 1, 2)
+    got = predicted_stress(stress, moduli, h, 0.4)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * np.abs(want).max())
+    r = np.empty((3, 3))
+    polar_rotation(np.eye(3) + h[0], r)
+    np.testing.assert_allclose(r, rot[0], rtol=0, atol=1e-14)
 
 
 def test_a_tolerance_that_defers_nothing_is_bitwise_every_step(packing):

@@ -34,7 +34,8 @@ import pytest
 
 from grainscale.config.case import SolverCfg
 from grainscale.config.rve import RVEParams, TriaxialTest
-from grainscale.coupling.rve_material import RVEMaterial, affine_tangent
+from grainscale.coupling.predictor import affine_tangent
+from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.dem import element_tests
 from grainscale.dem.state import RVEBatch, from_packing
 from grainscale.io.packing import read_packing
@@ -247,8 +248,8 @@ def test_stored_moduli_cannot_bound_tighter():
 
 
 def predictor_error(b: RVEBatch) -> float:
-    """Largest component error of the adaptive updates' predictor (rve_material.
-    affine_tangent, read from the six stored moduli) against the affine stiffness summed
+    """Largest component error of the adaptive updates' predictor (coupling/
+    predictor.affine_tangent, read from the six stored moduli) against the affine stiffness summed
     over the network's springs (mixed moments included), relative to the largest
     component, over 200 random symmetric strains."""
     mat = RVEMaterial("sand", PARAMS, [b], n_points=1, retile_width=0.0)

@@ -32,6 +32,7 @@ import numpy as np
 
 from grainscale.config.case import DEMMaterialCfg
 from grainscale.config.rve import RVEParams
+from grainscale.coupling import predictor
 from grainscale.dem import engine, homogenise, lattice, retile
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import (
@@ -57,31 +58,6 @@ def bulk_density(library: list[RVEBatch]) -> float:
 def _sym(sigma: np.ndarray) -> np.ndarray:
     """(sigma + sigma^T)/2 of (..., 3, 3) stresses [Pa]."""
     return 0.5 * (sigma + np.swapaxes(sigma, -1, -2))
-
-
-def affine_tangent(moduli: np.ndarray, ratio: float, strain: np.ndarray) -> np.ndarray:
-    """(k,3,3) stress increment [Pa] of the contact network's affine (Voigt) stiffness for
-    small symmetric strains (k,3,3), read from the stored moduli K_ab = C_aabb [Pa] of the
-    whole contact law (kernel.py item 8) with ratio = kt/kn.
-
-    For contacts i with branch d = |d| n, the affine moduli are
-    C_abcd = (1/V) sum kn |d|^2 [n_a n_b n_c n_d + ratio (delta_ac n_b n_d - n_a n_b n_c n_d)]
-    (tangential springs on the affine relative displacement, sym in ab), so
-    K_ab = (1 - ratio) S_ab (a != b) and the row sums F_a = sum_k K_ak = (1/V) sum kn
-    |d|^2 n_a^2 with S_ab = (1/V) sum kn |d|^2 n_a^2 n_b^2. The normal block is K itself,
-    d sigma_aa = sum_b K_ab eps_bb; the shear modulus follows from the same sums,
-    d sigma_ab = 2 G_ab eps_ab with G_ab = K_ab + ratio (F_a + F_b) / 4 (a != b) (the
-    normal springs' C_abab = C_aabb: central forces obey Cauchy's relations). The fabric's
-    mixed moments (n_a^3 n_b, ...) are not stored and are left out: exact for fabrics
-    whose principal axes are the cell's, an approximation otherwise. K's diagonal also
-    holds the bound on the forces' turning (kernel.py contact_pass), a pressure-sized
-    addition to kn-sized moduli that only stiffens the prediction.
-    """
-    rowsum = moduli.sum(axis=2)  # F_a
-    out = np.einsum("pab,pbb->pa", moduli, strain)[:, :, None] * np.eye(3)
-    shear = moduli + 0.25 * ratio * (rowsum[:, :, None] + rowsum[:, None, :])
-    off = 1.0 - np.eye(3)
-    return out + off * 2.0 * shear * strain
 
 
 _DEM = DEMMaterialCfg(type="dem")  # the case file's defaults are the only ones
@@ -276,7 +252,7 @@ class RVEMaterial:
         (I + H_acc) h, as if it had followed every step) over
         ceil(max |H_acc| / strain_per_substep) DEM steps. Meanwhile its stress is
         predicted from its last update, R [sym(sigma) + C_aff : (U - I)] R^T with
-        I + H_acc = R U and C_aff the affine moduli (`affine_tangent`): objective, and at
+        I + H_acc = R U and C_aff the affine moduli (coupling/predictor.py): objective, and at
         least as stiff as the RVE, so the waiting dissipates rather than feeds
         oscillations (docs/coupling.md: the error is of the order of the affine modulus
         times the tolerance, and does not accumulate).
@@ -353,17 +329,10 @@ class RVEMaterial:
         self.seconds += time.perf_counter() - t0
 
     def _predicted(self, batch: RVEBatch, rows: np.ndarray, which: np.ndarray) -> np.ndarray:
-        """(k,3,3) R [sym(sigma) + C_aff : (U - I)] R^T [Pa] of a group's RVEs `which`
-        (their points rows[which]): the stress of each one's last update plus the affine
-        moduli of its last update (`affine_tangent`) times the accumulated stretch, turned
-        by the accumulated rotation, I + H_acc = R U (polar decomposition: with
-        I + H_acc = W S V^T, R = W V^T and U = V S V^T)."""
-        w, sv, vt = np.linalg.svd(np.eye(3) + self.H_acc[rows[which]])
-        rot = w @ vt
-        stretch = np.einsum("pka,pk,pkb->pab", vt, sv - 1.0, vt)  # U - I
-        sigma = _sym(batch.stress[which]) + affine_tangent(
-            batch.stiffness[which], self.cp.stiffness_ratio, stretch)
-        return rot @ sigma @ np.swapaxes(rot, 1, 2)
+        """(k,3,3) predicted stresses [Pa] of a group's waiting RVEs `which` (their points
+        rows[which]): coupling/predictor.py."""
+        return predictor.predicted_stress(batch.stress[which], batch.stiffness[which],
+                                          self.H_acc[rows[which]], self.cp.stiffness_ratio)
 
     def _reduce_cells(self, batch: RVEBatch, target) -> None:
         """lattice.reduce_cells of a group; on the GPU only the RVEs to reduce make the
