@@ -61,6 +61,11 @@ def test_two_packings_agree_with_the_recipes_sixteen(tmp_path):
     assert r["peak_phi_deg"] >= r["phi_deg"]
     assert set(r["phi_per_axis_deg"]) == {"x", "y", "z"} and len(r["phi_per_packing_deg"]) == 2
     assert r["packings"] == ["packing_0.h5", "packing_1.h5"]
+    paths = r["paths"]  # each packing's path, its three axes averaged, on 41 strains
+    assert len(paths["axial_strain"]) == 41 and paths["axial_strain"][0] == 0.0
+    assert np.shape(paths["volumetric_strain_per_packing"]) == (2, 41)
+    # the path's peak is at most the peak of the axes' paths averaged (a mean of maxima)
+    assert np.max(paths["phi_deg_per_packing"], axis=1).mean() <= r["peak_phi_deg"] + 0.01
     # 0.1 /s over DEM steps of 0.3 sqrt(m_min / (E r_max)): 6.2e-6 s for the recipe's
     # 3 and 7 mm bounds, up to 10 % longer where a packing's smallest grain is larger
     assert r["strain_rate"] == 0.1
@@ -104,3 +109,27 @@ def test_loading_table_pairs_the_packings(capsys):
     other = dict(today, packings=["x.h5"] * len(today["packings"]))
     with pytest.raises(SystemExit, match="different packings"):
         lt.paired(ref, other, "phi")
+
+
+def test_loading_table_compares_the_paths(capsys):
+    """With the packings' paths in the results (friction_angle.py), the second table
+    gives the paired mean change of each path from the reference: at the common end
+    strain it is the mean of the per-packing differences (checked against the files'
+    own last points, which both end beyond the common end by less than a row); today's
+    coupled loading (2e-6, damping 0.2) dilates 1.2 % more than the slow limit, over
+    three times its band: not within realisation noise."""
+    lt = load_example("intrusion/loading_table.py")
+    data = STUDIES / "intrusion" / "data" / "loading16"
+    files = [data / "d0.0_r0.1.json", data / "d0.2_r0.32.json"]
+    assert lt.main([str(f) for f in files]) == 0
+    rows = json.loads(capsys.readouterr().out.splitlines()[-1])
+    ref, today = (json.loads(f.read_text())["paths"] for f in files)
+    end = min(ref["axial_strain"][-1], today["axial_strain"][-1])
+    want = np.mean([np.interp(end, today["axial_strain"], b)
+                    - np.interp(end, ref["axial_strain"], a) for a, b in zip(
+                        ref["volumetric_strain_per_packing"],
+                        today["volumetric_strain_per_packing"], strict=True)])
+    got = rows[1]["volumetric_strain_path"]
+    assert got["end"] == pytest.approx(want, abs=1e-12)
+    assert got["rms"] > 3 * got["band_rms"] and not rows[1]["within_noise"]
+    assert rows[0]["within_noise"] and rows[0]["phi_path"]["rms"] == 0.0

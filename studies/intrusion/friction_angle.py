@@ -28,7 +28,9 @@ Which packings:
 A packing's sample is its mean over the axes; phi is the mean over packings with a 95 %
 band from their spread (Student t), the half-width of the interval in which the recipe's
 mean angle lies. Writes phi.json ({"phi_deg": ..., "phi_band95_deg": ..., ...}, the
-input of analyse.py --phi-from) and prints it.
+input of analyse.py --phi-from) and prints it; with packings at one pressure it also holds
+each packing's path (mobilised angle and volumetric strain against axial strain, averaged
+over the axes, on 41 strains: `paths`), which loading_table.py compares between loadings.
 """
 
 from __future__ import annotations
@@ -104,19 +106,40 @@ def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
     strain_per_step = test.strain_rate * rve.timestep(case, batch)
     steady = np.empty((len(paths), len(axes)))
     peak = np.empty_like(steady)
+    paths_phi, paths_ev = [], []
     for j, axis in enumerate(axes):
         along = case.model_copy(update={"triaxial": test.model_copy(update={"axis": axis})})
         curves = rve.triaxial(along, batch, progress=False, per_rve=True)
         for i, curve in enumerate(curves):
             rows = rve.rows_of(curve)
             phi = mobilised_angle(rows, axis)
+            strain = np.array([r["axial_strain"] for r in rows])
+            paths_phi.append((i, strain, phi))
+            paths_ev.append((i, strain, np.array([r["volumetric_strain"] for r in rows])))
             window = np.array([r["axial_strain"] for r in rows]) >= start
             if window.sum() < 5:
                 raise SystemExit(f"fewer than 5 rows beyond axial strain {start}: "
                                  f"raise [triaxial] axial_strain or lower --from")
             steady[i, j] = phi[window].mean()
             peak[i, j] = phi.max()
-    return steady, peak, strain_per_step
+    return steady, peak, strain_per_step, mean_paths(len(paths), paths_phi, paths_ev)
+
+
+def mean_paths(n: int, phis, evs, points: int = 41) -> dict:
+    """Each packing's mobilised angle and volumetric strain, averaged over its axes, on
+    a common axial-strain grid from 0 to the shortest path's end (linear interpolation)."""
+    end = min(float(p[1][-1]) for p in phis)
+    grid = np.linspace(0.0, end, points)
+    out = {"axial_strain": grid, "phi_deg": np.zeros((n, points)),
+           "volumetric_strain": np.zeros((n, points))}
+    count = np.zeros(n)
+    for (i, x, phi), (_, _, ev) in zip(phis, evs, strict=True):
+        out["phi_deg"][i] += np.interp(grid, x, phi)
+        out["volumetric_strain"][i] += np.interp(grid, x, ev)
+        count[i] += 1
+    out["phi_deg"] /= count[:, None]
+    out["volumetric_strain"] /= count[:, None]
+    return out
 
 
 def summary(samples: np.ndarray) -> tuple[float, float]:
@@ -171,11 +194,12 @@ def main(argv: list[str] | None = None) -> int:
         by_pressure.setdefault(level or case.triaxial.confining_pressure, []).append(i)
     steady = np.empty((len(tested), len(args.axes)))
     peak = np.empty_like(steady)
+    paths = {}
     for pressure, idx in sorted(by_pressure.items()):
         print(f"triaxial at {pressure:g} Pa: {len(idx)} packing(s) x axes {args.axes}",
               file=sys.stderr, flush=True)
         test = case.triaxial.model_copy(update={"confining_pressure": pressure})
-        steady[idx], peak[idx], strain_per_step = steady_angles(
+        steady[idx], peak[idx], strain_per_step, paths[pressure] = steady_angles(
             [tested[i][0] for i in idx], case, test, args.axes, args.start)
     phi, band = summary(steady.mean(axis=1))
     peak_mean, peak_band = summary(peak.mean(axis=1))
@@ -191,6 +215,12 @@ def main(argv: list[str] | None = None) -> int:
         "strain_rate": case.triaxial.strain_rate, "damping": case.rve.damping,
         "strain_per_dem_step": float(f"{strain_per_step:.3g}"),
         "case": str(args.case), "packings": [p.name for p, _ in tested]}
+    if len(by_pressure) == 1:  # the paths, for comparing loadings (loading_table.py)
+        (p,) = paths.values()
+        result["paths"] = {"axial_strain": [round(float(x), 6) for x in p["axial_strain"]],
+                           "phi_deg_per_packing": np.round(p["phi_deg"], 4).tolist(),
+                           "volumetric_strain_per_packing":
+                               np.round(p["volumetric_strain"], 7).tolist()}
     if len(by_pressure) > 1:
         result["phi_per_level_deg"] = {
             f"{p:g}": [round(v, 2) for v in summary(steady[idx].mean(axis=1))]

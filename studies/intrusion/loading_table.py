@@ -9,6 +9,15 @@ peak angles with their 95 % bands, and their paired change from the reference (t
 over packings of the per-packing differences, with its 95 % band): the measure of what a
 loading moves, free of the scatter between packings. A loading keeps the physics where
 both changes lie within `--limit` degrees (default 0.3) of the slow reference.
+
+Where the results hold the packings' paths (`paths`: friction_angle.py writes them for
+packings at one pressure), a second table compares the triaxial curves: for the
+mobilised angle and the volumetric strain, the paired difference from the reference at
+each of 40 axial strains (the two results' paths interpolated to a common range), its
+mean over the packings and that mean's 95 % band;
+printed as the rms over the strains of each (the band's rms is the realisation noise
+left in a paired mean of N packings) and the difference at the test's end. A curve is
+"within realisation noise" where the mean difference's rms does not exceed its band's.
 """
 
 from __future__ import annotations
@@ -21,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from friction_angle import summary  # noqa: E402
+from friction_angle import summary, t95  # noqa: E402
 
 
 def _packings(r: dict) -> tuple:
@@ -38,6 +47,46 @@ def paired(ref: dict, other: dict, key: str) -> tuple[float, float]:
     a = np.asarray(ref[f"{key}_per_packing_deg"])
     b = np.asarray(other[f"{key}_per_packing_deg"])
     return summary(b - a)
+
+
+def paired_paths(ref: dict, other: dict, key: str) -> dict[str, float]:
+    """rms over the strains of the mean paired difference other - ref of a path and of
+    its 95 % band, and the mean difference with its band at the last strain."""
+    xa, xb = np.asarray(ref["paths"]["axial_strain"]), np.asarray(other["paths"]["axial_strain"])
+    grid = np.linspace(0.0, min(xa[-1], xb[-1]), len(xa))[1:]  # strain 0: both 0
+
+    def on_grid(x, paths):
+        return np.array([np.interp(grid, x, p) for p in paths])
+
+    d = (on_grid(xb, other["paths"][f"{key}_per_packing"])
+         - on_grid(xa, ref["paths"][f"{key}_per_packing"]))
+    n = len(d)
+    mean = d.mean(axis=0)
+    band = t95(n - 1) * d.std(axis=0, ddof=1) / np.sqrt(n)
+    return {"rms": float(np.sqrt(np.mean(mean**2))), "band_rms": float(np.sqrt(np.mean(
+        band**2))), "end": float(mean[-1]), "end_band": float(band[-1])}
+
+
+def curves_table(runs: list[dict]) -> list[dict]:
+    """The second table (module docstring); prints it and returns its rows."""
+    ref = runs[0]
+    print("\n| strain per DEM step | rate (1/s) | damping | phi path: mean change, rms "
+          "(deg) | its band | at the end | eps_v path: mean change, rms | its band | at "
+          "the end | both within realisation noise |")
+    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    rows = []
+    for r in runs:
+        phi = paired_paths(ref, r, "phi_deg")
+        ev = paired_paths(ref, r, "volumetric_strain")
+        ok = phi["rms"] <= phi["band_rms"] and ev["rms"] <= ev["band_rms"]
+        rows.append({"strain_per_dem_step": r["strain_per_dem_step"], "phi_path": phi,
+                     "volumetric_strain_path": ev, "within_noise": ok})
+        print(f"| {r['strain_per_dem_step']:.2g} | {r['strain_rate']:g} | "
+              f"{r.get('damping', '(recipe)')} | {phi['rms']:.2f} | {phi['band_rms']:.2f} | "
+              f"{phi['end']:+.2f} +- {phi['end_band']:.2f} | {ev['rms']:.2e} | "
+              f"{ev['band_rms']:.2e} | {ev['end']:+.1e} +- {ev['end_band']:.1e} | "
+              f"{'yes' if ok else 'no'} |")
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,6 +114,9 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['phi_band95_deg']:.2f} | {steady[0]:+.2f} +- {steady[1]:.2f} | "
               f"{r['peak_phi_deg']:.2f} +- {r['peak_phi_band95_deg']:.2f} | "
               f"{peak[0]:+.2f} +- {peak[1]:.2f} | {'yes' if ok else 'no'} |")
+    if all("paths" in r for r in runs):
+        for row, c in zip(rows, curves_table(runs), strict=True):
+            row.update(c)
     print(json.dumps(rows))
     return 0
 

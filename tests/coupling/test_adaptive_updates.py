@@ -161,6 +161,8 @@ def test_deferred_increments_reach_the_dem_whole_and_the_stress_stays_within_the
           f"{ref.rve_steps}; updates {ada.rve_updates} against {ref.rve_updates}")
     assert 0.0 < worst <= 1.0
     assert ada.rve_updates < 0.5 * ref.rve_updates
+    n = ada.batch.n_particles  # cost.json's particle-steps: DEM steps x spheres
+    assert (ada.particle_steps, ref.particle_steps) == (n * ada.rve_steps, n * ref.rve_steps)
     # a composed increment needs no more steps than its parts (up to each update's
     # rounding up), fewer where they partly cancel
     assert ada.rve_steps <= ref.rve_steps + ada.rve_updates

@@ -74,7 +74,8 @@ def rebalance(s: MPMState, case, case_dir, factory, steps: int) -> tuple[MPMStat
                       comm=comm, owners=owners)
     if not comm.any(not load_rows(new, incoming)):
         for a, b in zip(s.materials, new.materials, strict=True):
-            for counter in ("seconds", "rve_steps", "rve_updates"):  # the cost report's sums
+            # the cost report's sums
+            for counter in ("seconds", "rve_steps", "rve_updates", "particle_steps"):
                 if hasattr(a, counter):
                     setattr(b, counter, getattr(a, counter))
             if isinstance(b, RVEMaterial):

@@ -153,6 +153,7 @@ class RVEMaterial:
         self.substeps = 0  # DEM steps of the last update (largest over RVEs)
         self.seconds = 0.0  # wall time spent in DEM updates
         self.rve_steps = 0  # sum over RVEs of DEM steps taken
+        self.particle_steps = 0  # sum over RVEs of DEM steps x spheres
         self.retiled = 0  # cells doubled so far on this process
         # per RVE, particle-steps plus contact-steps (the end-of-increment pass
         # included) since the last rebalancing: the measured work that decides the load
@@ -307,6 +308,7 @@ class RVEMaterial:
                 stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
             self.rve_steps += int(nsteps.sum())
+            self.particle_steps += int(nsteps.sum()) * batch.n_particles
             # particle- and contact-steps, and the end-of-increment evaluation of an RVE
             # that stepped (one more pass over its contacts, kernel.py item 8)
             self.work[rows] += (nsteps * (batch.n_particles + batch.ncontact)
