@@ -26,7 +26,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from grainscale.config.case import load_rve_case
+from grainscale.config.case import STRAIN_PER_SUBSTEP, load_rve_case
 from grainscale.coupling.materials import cached_packing
 from grainscale.dem import engine
 from grainscale.dem.generate import contact_params
@@ -83,9 +83,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         base = [cached_packing(case.rve, k, Path(tmp) / f"p{k}.h5", progress=False)
                 for k in range(2)]
-    # components of ~0.3 strain_per_substep (2e-6, the default) a step: the largest of
-    # nine stays near the increment a quasi-static RVE takes per DEM step
-    strain = 0.3 * 2e-6
+    # components of ~0.3 strain_per_substep (the default) a step: the largest of nine
+    # stays near the increment a quasi-static RVE takes per DEM step
+    strain = 0.3 * STRAIN_PER_SUBSTEP
     npart = base[0].n_particles
     state_bytes = sum(v.nbytes for v in vars(base[0]).values() if isinstance(v, np.ndarray))
     fits = {}

@@ -102,7 +102,7 @@ def test_loading_table_pairs_the_packings(capsys):
     ref = json.loads((data / "d0.2_r0.03.json").read_text())
     today = json.loads((data / "d0.2_r0.32.json").read_text())
     assert lt.main([str(data / "d0.2_r0.03.json"), str(data / "d0.2_r0.32.json")]) == 0
-    rows = json.loads(capsys.readouterr().out.splitlines()[-1])
+    rows = json.loads(capsys.readouterr().out.splitlines()[-1])["rows"]
     want = np.mean(np.subtract(today["phi_per_packing_deg"], ref["phi_per_packing_deg"]))
     assert rows[1]["phi_change"][0] == pytest.approx(want, abs=1e-12)
     assert rows[0]["within"] and not rows[1]["within"]  # +0.65 deg: beyond 0.3
@@ -122,7 +122,7 @@ def test_loading_table_compares_the_paths(capsys):
     data = STUDIES / "intrusion" / "data" / "loading16"
     files = [data / "d0.0_r0.1.json", data / "d0.2_r0.32.json"]
     assert lt.main([str(f) for f in files]) == 0
-    rows = json.loads(capsys.readouterr().out.splitlines()[-1])
+    rows = json.loads(capsys.readouterr().out.splitlines()[-1])["rows"]
     ref, today = (json.loads(f.read_text())["paths"] for f in files)
     end = min(ref["axial_strain"][-1], today["axial_strain"][-1])
     want = np.mean([np.interp(end, today["axial_strain"], b)
@@ -133,3 +133,22 @@ def test_loading_table_compares_the_paths(capsys):
     assert got["end"] == pytest.approx(want, abs=1e-12)
     assert got["rms"] > 3 * got["band_rms"] and not rows[1]["within_noise"]
     assert rows[0]["within_noise"] and rows[0]["phi_path"]["rms"] == 0.0
+
+
+def test_loading_table_trend_is_the_least_squares_line(capsys):
+    """The trend through the reference over the undamped rows: the slope minimises the
+    squared residuals (zero derivative: sum x (y - k x) = 0, to round-off), and the
+    damped rows are left out of it."""
+    lt = load_example("intrusion/loading_table.py")
+    data = STUDIES / "intrusion" / "data" / "loading16"
+    names = ["d0.0_r0.1", "d0.0_r0.32", "d0.0_r0.48", "d0.2_r0.32", "d0.0_r0.8"]
+    runs = [json.loads((data / f"{n}.json").read_text()) for n in names]
+    fit = lt.trend(runs)
+    undamped = [r for r in runs[1:] if r["damping"] == 0.0]
+    x = np.array([r["strain_per_dem_step"] - runs[0]["strain_per_dem_step"] for r in undamped])
+    y = np.array([np.mean(np.subtract(r["phi_per_packing_deg"], runs[0]["phi_per_packing_deg"]))
+                  for r in undamped])
+    k = fit["phi"][0]
+    assert abs(x @ (y - k * x)) < 1e-12 * abs(x @ y)
+    assert lt.trend(runs[:2]) == {}  # one row: no line
+    capsys.readouterr()

@@ -24,7 +24,10 @@ def packing():
 
 
 def material(packing, n=3, **kw) -> RVEMaterial:
+    """Quasi-static RVEs of the packing, every one stepped every MPM step unless
+    update_tolerance is given (the case file's default is strain_per_substep)."""
     params, pack = packing
+    kw.setdefault("update_tolerance", 0.0)
     return RVEMaterial("sand", params, [pack], n_points=n, mode="quasi_static",
                        retile_width=0.0, **kw)
 
@@ -238,13 +241,27 @@ def test_adaptive_updates_need_quasi_static_rves(packing, tmp_path):
     with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 1e-06.*"
                                           r"valid: 0, or time_integration = 'quasi_static'"):
         load_case(case)
-    # above one DEM step's strain: refused (a longer lag feeds oscillations)
+    # above one DEM step's strain: refused (it would save nothing and add error)
     case.write_text(text.replace('time_integration = "dynamic"',
                                  'time_integration = "quasi_static"\n'
-                                 'update_tolerance = 1e-5'))
+                                 'strain_per_substep = 2e-6\nupdate_tolerance = 1e-5'))
     with pytest.raises(ConfigError, match=r"update_tolerance = 1e-05: above "
                                           r"strain_per_substep = 2e-06; valid: 0 to"):
         load_case(case)
     with pytest.raises(ValueError, match="valid 0 to strain_per_substep"):
         RVEMaterial("sand", params, [pack], n_points=1, mode="quasi_static",
-                    update_tolerance=1e-5)
+                    strain_per_substep=2e-6, update_tolerance=1e-5)
+    # the default: one DEM step's strain for quasi-static RVEs (written so in
+    # case.resolved.toml), 0 for dynamic ones, and no local damping in either
+    case.write_text(text.replace('time_integration = "dynamic"',
+                                 'time_integration = "quasi_static"\n'
+                                 'strain_per_substep = 3e-6'))
+    c = load_case(case)
+    assert c.materials["sand"].update_tolerance == 3e-6 and c.rve.damping == 0.2  # as set
+    case.write_text(case.read_text().replace("\ndamping = 0.2", "\n"))
+    assert load_case(case).rve.damping == 0.0
+    case.write_text(text)
+    assert load_case(case).materials["sand"].update_tolerance == 0.0
+    assert RVEMaterial("sand", params, [pack], n_points=1).update_tolerance == 0.0
+    assert RVEMaterial("sand", params, [pack], n_points=1, mode="quasi_static",
+                       strain_per_substep=4e-6).update_tolerance == 4e-6

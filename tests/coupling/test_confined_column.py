@@ -62,16 +62,19 @@ def test_undamped_column_does_not_gain_energy(tmp_path):
 
 
 def test_damped_quasi_static_column_never_exceeds_its_initial_energy(tmp_path):
-    """Quasi-static RVEs with local damping 0.2 (the intrusion's settings) and at least 4
-    DEM steps per MPM step: the kinetic energy never exceeds KE_0 beyond round-off, and
-    the damping takes it down by orders of magnitude (measured: 3.5e-5 of the first
-    fifth's peak in the last fifth). With the lagging stress it reached 30 x KE_0.
+    """Quasi-static RVEs with local damping 0.2 at 2e-6 per DEM step, every RVE stepped
+    every MPM step (the coupling itself; adaptive updates are the last test's), and at
+    least 4 DEM steps per MPM step: the kinetic energy never exceeds KE_0 beyond
+    round-off, and the damping takes it down by orders of magnitude (measured: 3.5e-5 of
+    the first fifth's peak in the last fifth). With the lagging stress it reached
+    30 x KE_0.
 
     With fewer DEM steps per MPM step the peak exceeds this small KE_0 (1.8 x with
     min_substeps 1): the RVEs' own initial imbalance, not a gain (next test).
     """
     ke = run(tmp_path, "quasi_static", time={"end": 0.06}, rve={"damping": 0.2},
-             **{"materials.sand": {"time_integration": "quasi_static", "min_substeps": 4}})
+             **{"materials.sand": {"time_integration": "quasi_static", "min_substeps": 4,
+                                   "strain_per_substep": 2e-6, "update_tolerance": 0.0}})
     assert ke.max() <= ke[0] * (1 + 1e-9), ke.max() / ke[0]
     first, last = fifths(ke)
     assert last < 1e-2 * first, (first, last)
@@ -88,7 +91,8 @@ def test_quasi_static_column_with_one_step_increments_releases_only_its_prestres
     source of fixed size, where negative damping would scale with KE_0. So:
     - started 10x faster (KE_0 = 2.5e-6 J), the peak is KE_0 itself (bound: round-off);
     - started from rest, the peak stays below 5 % of that KE_0 (measured 1.7 %)."""
-    sand = {"materials.sand": {"time_integration": "quasi_static", "min_substeps": 1}}
+    sand = {"materials.sand": {"time_integration": "quasi_static", "min_substeps": 1,
+                               "strain_per_substep": 2e-6, "update_tolerance": 0.0}}
     fast = run(tmp_path, "fast", time={"end": 0.03}, rve={"damping": 0.2},
                **{"bodies.0": {"velocity": [0.0, 0.0, 2e-3]}}, **sand)
     assert fast.max() <= fast[0] * (1 + 1e-9), fast.max() / fast[0]
@@ -117,3 +121,11 @@ def test_adaptive_updates_do_not_feed_the_column(tmp_path, loading):
     stepped = json.loads((tmp_path / "adaptive" / "cost.json").read_text())[
         "fraction_of_rves_stepped"]
     assert stepped < 0.5, stepped
+    # from rest the packings' own imbalance (previous test) sets the column ringing; an
+    # RVE that waits carries a strain oscillation below the tolerance elastically, so
+    # this ringing is not dissipated as with full updates (the last fifth keeps
+    # 1e-8-1e-7 J here, against 1e-10 J or less), but it stays bounded by that source
+    # (below 5 % of the fast start's KE_0, as with full updates)
+    rest = run(tmp_path, "rest", time={"end": 0.03}, rve={"damping": damping},
+               **{"bodies.0": {"velocity": [0.0, 0.0, 0.0]}}, **sand)
+    assert rest.max() < 0.05 * ke[0], rest.max() / ke[0]

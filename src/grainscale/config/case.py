@@ -32,6 +32,7 @@ NonNeg = Annotated[float, Field(ge=0)]
 Axis = Literal["x", "y", "z"]
 Face = Literal["x-", "x+", "y-", "y+", "z-", "z+"]
 FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is given
+STRAIN_PER_SUBSTEP = 3e-6  # quasi-static RVEs: strain per DEM step, undamped (validation §3.1)
 
 
 class GradedAxisCfg(StrictModel):
@@ -308,12 +309,15 @@ class DEMMaterialCfg(StrictModel):
     # damping; it still lends strength in proportion to the rate, docs/coupling.md)
     allow_rve_damping: bool = False
     min_substeps: Annotated[int, Field(ge=1)] = 1  # DEM steps per MPM step, at least
-    strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = 2e-6  # quasi_static only
+    # quasi_static only: the RVE's strain per DEM step (docs/validation.md §3.1: the
+    # cheapest undamped loading whose triaxial response is the slow limit's)
+    strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = STRAIN_PER_SUBSTEP
     # adaptive updates (quasi_static only; at most strain_per_substep): an RVE whose
     # accumulated increment since its last DEM update (max |H_acc|) is below this is not
-    # stepped, its stress the last one rotated with the accumulated spin
-    # (docs/coupling.md); 0: every RVE every step
-    update_tolerance: Annotated[float, Field(ge=0)] = 0.0  # at most strain_per_substep
+    # stepped, its stress predicted with its affine stiffness and turned with the
+    # accumulated rotation (docs/coupling.md); 0: every RVE every step. Default (None):
+    # strain_per_substep for quasi_static RVEs, 0 for dynamic ones
+    update_tolerance: Annotated[float, Field(ge=0)] | None = None
     # ... and is stepped at least every this many MPM steps whatever its increment
     max_deferred_steps: Annotated[int, Field(ge=1, le=10_000)] = 20
     # an RVE cell narrower than this many mean grain diameters across a face pair is
@@ -703,15 +707,26 @@ def check_case(case: Case) -> None:
                                   f"a stress (solver.gravity = {list(case.solver.gravity)})")
     dynamic = [n for n, m in case.materials.items()
                if m.type == "dem" and m.time_integration == "dynamic"]
-    for name, m in case.materials.items():
-        if (m.type == "dem" and m.time_integration == "quasi_static"
-                and m.update_tolerance > m.strain_per_substep):
+    quasi_static = [n for n, m in case.materials.items()
+                    if m.type == "dem" and m.time_integration == "quasi_static"]
+    for name in quasi_static:
+        m = case.materials[name]
+        if m.update_tolerance is None:
+            m.update_tolerance = m.strain_per_substep  # written so in case.resolved.toml
+            # still a default: a case written back without its defaults (exclude_unset)
+            # follows the strain per DEM step it is given
+            m.__pydantic_fields_set__.discard("update_tolerance")
+        if m.update_tolerance > m.strain_per_substep:
             raise ConfigError(
                 f"materials.{name}.update_tolerance = {m.update_tolerance}: above "
                 f"strain_per_substep = {m.strain_per_substep}; valid: 0 to "
-                "strain_per_substep (a waiting RVE's stress lags its strain, and a lag of "
-                "more than one DEM step's strain feeds energy into oscillations: "
+                "strain_per_substep (a composed increment owes as many DEM steps as its "
+                "parts, so a larger tolerance saves nothing and adds error: "
                 "docs/coupling.md)")
+    for name in dynamic:
+        if case.materials[name].update_tolerance is None:
+            case.materials[name].update_tolerance = 0.0
+            case.materials[name].__pydantic_fields_set__.discard("update_tolerance")
     for name in dynamic:
         if case.materials[name].update_tolerance > 0:
             raise ConfigError(
@@ -719,7 +734,9 @@ def check_case(case: Case) -> None:
                 f"{case.materials[name].update_tolerance}: adaptive updates defer an RVE's "
                 "increment, which a real-time RVE cannot (its clock is the MPM's); valid: 0, "
                 "or time_integration = 'quasi_static'")
-    if dynamic and case.rve is not None:
+    if (dynamic or quasi_static) and case.rve is not None:
+        # local damping lends the RVE strength in proportion to its loading rate, in
+        # real time and under the quasi-static loading alike (docs/validation.md §3.1)
         if "damping" not in case.rve.model_fields_set:
             case.rve.damping = 0.0  # written so in case.resolved.toml
         elif case.rve.damping > 0:

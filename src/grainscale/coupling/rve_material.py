@@ -85,7 +85,7 @@ class RVEMaterial:
                  local: np.ndarray | None = None, assignment: np.ndarray | None = None,
                  retile_width: float = _DEM.retile_width,
                  retile_max_factor: int = _DEM.retile_max_factor, device: str = "cpu",
-                 update_tolerance: float = _DEM.update_tolerance,
+                 update_tolerance: float | None = _DEM.update_tolerance,
                  max_deferred_steps: int = _DEM.max_deferred_steps):
         """n_points: points of this material over all ranks; local: the indices (into
         them) of the points this process holds (default: all). The packing of each point
@@ -96,9 +96,12 @@ class RVEMaterial:
         are those of a case file's "dem" material (config.case.DEMMaterialCfg).
         device: where `update` steps the RVEs, "cpu" or "cuda" (solver.device).
         update_tolerance, max_deferred_steps: adaptive updates (quasi_static only; 0:
-        every RVE every step), see `update`."""
+        every RVE every step; None: strain_per_substep for quasi_static, else 0), see
+        `update`."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
+        if update_tolerance is None:  # the case file's default
+            update_tolerance = strain_per_substep if mode == "quasi_static" else 0.0
         if update_tolerance > 0 and mode != "quasi_static":
             raise ValueError(f"update_tolerance = {update_tolerance} with mode {mode!r}: "
                              "adaptive updates need mode 'quasi_static'; valid with "
@@ -258,6 +261,9 @@ class RVEMaterial:
         oscillations (docs/coupling.md: the error is of the order of the affine modulus
         times the tolerance, and does not accumulate).
         """
+        if dH.shape != (self.n_points, 3, 3):
+            raise ValueError(f"dH of shape {dH.shape}: one (3, 3) increment per point of "
+                             f"material {self.name!r}, ({self.n_points}, 3, 3)")
         if not self.groups:
             return
         t0 = time.perf_counter()
