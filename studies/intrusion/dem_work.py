@@ -137,6 +137,8 @@ def main() -> None:
     regions = {}
     for name, mask in (("all", np.ones(len(work), bool)), ("fine cells", fine),
                        ("graded cells", ~fine)):
+        if not mask.any():  # a uniform grid: every cell is a fine one
+            continue
         w = np.sort(work[mask])[::-1]
         top = w[:max(1, len(w) // 10)].sum() / w.sum() if w.sum() > 0 else float("nan")
         regions[name] = {"points": int(mask.sum()), "mean": float(w.mean()),
