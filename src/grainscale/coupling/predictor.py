@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from grainscale.linalg3 import inv3
+
 
 @numba.njit(cache=True)
 def _affine_tangent(k, ratio, e, out):
@@ -52,38 +54,20 @@ def affine_tangent(moduli, ratio, strain):
 
 
 @numba.njit(cache=True)
-def _inverse_transpose(m, out):
-    """out = m^-T of a 3x3 (the cofactor matrix over the determinant)."""
-    c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
-    c01 = m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]
-    c02 = m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]
-    inv_det = 1.0 / (m[0, 0] * c00 + m[0, 1] * c01 + m[0, 2] * c02)
-    out[0, 0] = c00 * inv_det
-    out[0, 1] = c01 * inv_det
-    out[0, 2] = c02 * inv_det
-    out[1, 0] = (m[0, 2] * m[2, 1] - m[0, 1] * m[2, 2]) * inv_det
-    out[1, 1] = (m[0, 0] * m[2, 2] - m[0, 2] * m[2, 0]) * inv_det
-    out[1, 2] = (m[0, 1] * m[2, 0] - m[0, 0] * m[2, 1]) * inv_det
-    out[2, 0] = (m[0, 1] * m[1, 2] - m[0, 2] * m[1, 1]) * inv_det
-    out[2, 1] = (m[0, 2] * m[1, 0] - m[0, 0] * m[1, 2]) * inv_det
-    out[2, 2] = (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]) * inv_det
-
-
-@numba.njit(cache=True)
 def polar_rotation(f, rot):
     """rot = R of f = R U (det f > 0) by Newton's iteration R <- (R + R^-T) / 2 from f,
     which converges quadratically; a waiting RVE's f is within the tolerance of a
     rotation, so two or three iterations reach round-off (the iteration stops one step
     after a change below 1e-10)."""
     rot[:, :] = f
-    inv_t = np.empty((3, 3))
+    inv = np.empty((3, 3))
     close = False
     for _ in range(60):
-        _inverse_transpose(rot, inv_t)
+        inv3(rot, inv)
         change = 0.0
         for a in range(3):
             for b in range(3):
-                new = 0.5 * (rot[a, b] + inv_t[a, b])
+                new = 0.5 * (rot[a, b] + inv[b, a])
                 change = max(change, abs(new - rot[a, b]))
                 rot[a, b] = new
         if close:  # one step after a change of 1e-10 the next is ~1e-20: round-off
