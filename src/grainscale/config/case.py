@@ -35,6 +35,12 @@ FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is 
 STRAIN_PER_SUBSTEP = 3e-6  # quasi-static RVEs: strain per DEM step, undamped (validation §3.1)
 
 
+def default_update_tolerance(time_integration: str, strain_per_substep: float) -> float:
+    """A dem material's update_tolerance when none is given: one DEM step's strain for
+    quasi-static RVEs (adaptive updates on), 0 for dynamic ones (the only valid value)."""
+    return strain_per_substep if time_integration == "quasi_static" else 0.0
+
+
 class GradedAxisCfg(StrictModel):
     """One axis of a rectilinear grid written concisely (mpm/grid.graded_axis):
     cells of `cell` over `fine`, growing by `ratio` per cell away from it, up to
@@ -709,13 +715,16 @@ def check_case(case: Case) -> None:
                if m.type == "dem" and m.time_integration == "dynamic"]
     quasi_static = [n for n, m in case.materials.items()
                     if m.type == "dem" and m.time_integration == "quasi_static"]
+    for name in dynamic + quasi_static:
+        m = case.materials[name]
+        if m.update_tolerance is None:  # written so in case.resolved.toml, but still a
+            # default: a case written back without its defaults (exclude_unset) follows
+            # the time integration and strain per DEM step it is given
+            m.update_tolerance = default_update_tolerance(m.time_integration,
+                                                          m.strain_per_substep)
+            m.__pydantic_fields_set__.discard("update_tolerance")
     for name in quasi_static:
         m = case.materials[name]
-        if m.update_tolerance is None:
-            m.update_tolerance = m.strain_per_substep  # written so in case.resolved.toml
-            # still a default: a case written back without its defaults (exclude_unset)
-            # follows the strain per DEM step it is given
-            m.__pydantic_fields_set__.discard("update_tolerance")
         if m.update_tolerance > m.strain_per_substep:
             raise ConfigError(
                 f"materials.{name}.update_tolerance = {m.update_tolerance}: above "
@@ -723,10 +732,6 @@ def check_case(case: Case) -> None:
                 "strain_per_substep (a composed increment owes as many DEM steps as its "
                 "parts, so a larger tolerance saves nothing and adds error: "
                 "docs/coupling.md)")
-    for name in dynamic:
-        if case.materials[name].update_tolerance is None:
-            case.materials[name].update_tolerance = 0.0
-            case.materials[name].__pydantic_fields_set__.discard("update_tolerance")
     for name in dynamic:
         if case.materials[name].update_tolerance > 0:
             raise ConfigError(

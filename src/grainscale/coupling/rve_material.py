@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from grainscale.config.case import DEMMaterialCfg
+from grainscale.config.case import DEMMaterialCfg, default_update_tolerance
 from grainscale.config.rve import RVEParams
 from grainscale.coupling import predictor
 from grainscale.dem import engine, homogenise, lattice, retile
@@ -101,7 +101,7 @@ class RVEMaterial:
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         if update_tolerance is None:  # the case file's default
-            update_tolerance = strain_per_substep if mode == "quasi_static" else 0.0
+            update_tolerance = default_update_tolerance(mode, strain_per_substep)
         if update_tolerance > 0 and mode != "quasi_static":
             raise ValueError(f"update_tolerance = {update_tolerance} with mode {mode!r}: "
                              "adaptive updates need mode 'quasi_static'; valid with "
@@ -313,8 +313,9 @@ class RVEMaterial:
             else:
                 stress[rows] = _sym(batch.stress)
             most = max(most, int(nsteps.max()))
-            self.rve_steps += int(nsteps.sum())
-            self.particle_steps += int(nsteps.sum()) * batch.n_particles
+            taken = int(nsteps.sum())
+            self.rve_steps += taken
+            self.particle_steps += taken * batch.n_particles
             # particle- and contact-steps, and the end-of-increment evaluation of an RVE
             # that stepped (one more pass over its contacts, kernel.py item 8)
             self.work[rows] += (nsteps * (batch.n_particles + batch.ncontact)
