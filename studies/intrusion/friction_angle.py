@@ -106,7 +106,7 @@ def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
     strain_per_step = test.strain_rate * rve.timestep(case, batch)
     steady = np.empty((len(paths), len(axes)))
     peak = np.empty_like(steady)
-    paths_phi, paths_ev = [], []
+    tested = []  # (packing, axial strain, phi, eps_v) of every path
     for j, axis in enumerate(axes):
         along = case.model_copy(update={"triaxial": test.model_copy(update={"axis": axis})})
         curves = rve.triaxial(along, batch, progress=False, per_rve=True)
@@ -114,26 +114,26 @@ def steady_angles(paths: list[Path], case, test, axes: list[str], start: float):
             rows = rve.rows_of(curve)
             phi = mobilised_angle(rows, axis)
             strain = np.array([r["axial_strain"] for r in rows])
-            paths_phi.append((i, strain, phi))
-            paths_ev.append((i, strain, np.array([r["volumetric_strain"] for r in rows])))
-            window = np.array([r["axial_strain"] for r in rows]) >= start
+            tested.append((i, strain, phi, np.array([r["volumetric_strain"] for r in rows])))
+            window = strain >= start
             if window.sum() < 5:
                 raise SystemExit(f"fewer than 5 rows beyond axial strain {start}: "
                                  f"raise [triaxial] axial_strain or lower --from")
             steady[i, j] = phi[window].mean()
             peak[i, j] = phi.max()
-    return steady, peak, strain_per_step, mean_paths(len(paths), paths_phi, paths_ev)
+    return steady, peak, strain_per_step, mean_paths(len(paths), tested)
 
 
-def mean_paths(n: int, phis, evs, points: int = 41) -> dict:
-    """Each packing's mobilised angle and volumetric strain, averaged over its axes, on
-    a common axial-strain grid from 0 to the shortest path's end (linear interpolation)."""
-    end = min(float(p[1][-1]) for p in phis)
+def mean_paths(n: int, tested, points: int = 41) -> dict:
+    """Each of the n packings' mobilised angle and volumetric strain, averaged over its
+    axes, on a common axial-strain grid from 0 to the shortest path's end (linear
+    interpolation); tested: (packing, axial strain, phi, eps_v) of every path."""
+    end = min(float(x[-1]) for _, x, _, _ in tested)
     grid = np.linspace(0.0, end, points)
     out = {"axial_strain": grid, "phi_deg": np.zeros((n, points)),
            "volumetric_strain": np.zeros((n, points))}
     count = np.zeros(n)
-    for (i, x, phi), (_, _, ev) in zip(phis, evs, strict=True):
+    for i, x, phi, ev in tested:
         out["phi_deg"][i] += np.interp(grid, x, phi)
         out["volumetric_strain"][i] += np.interp(grid, x, ev)
         count[i] += 1

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from friction_angle import summary, t95  # noqa: E402
+from friction_angle import summary  # noqa: E402
 
 
 def _packings(r: dict) -> tuple:
@@ -64,9 +64,7 @@ def paired_paths(ref: dict, other: dict, key: str) -> dict[str, float]:
 
     d = (on_grid(xb, other["paths"][f"{key}_per_packing"])
          - on_grid(xa, ref["paths"][f"{key}_per_packing"]))
-    n = len(d)
-    mean = d.mean(axis=0)
-    band = t95(n - 1) * d.std(axis=0, ddof=1) / np.sqrt(n)
+    mean, band = np.array([summary(column) for column in d.T]).T
     return {"rms": float(np.sqrt(np.mean(mean**2))), "band_rms": float(np.sqrt(np.mean(
         band**2))), "end": float(mean[-1]), "end_band": float(band[-1])}
 
