@@ -93,6 +93,19 @@ def test_bad_damping_is_refused_before_any_packing(tmp_path, capsys):
     assert not (tmp_path / "phi_packings").exists()
 
 
+def test_bad_rolling_is_refused_before_any_packing(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        fa.main([str(QUICK), "--realisations", "2", "--rolling", "1.0", "0",
+                 "--out", str(tmp_path / "phi.json")])
+    assert "--rolling 1.0 0.0: Value error, rolling_stiffness = 1.0 with rolling_friction" \
+        in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        fa.main([str(QUICK), "RUN", "--rolling", "1.0", "0.1",
+                 "--out", str(tmp_path / "phi.json")])
+    assert "--rolling makes a new recipe" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
 def test_loading_table_pairs_the_packings(capsys):
     """loading_table.py on the committed loading results: the change of a loading from
     the slow reference is the mean of the per-packing differences (checked against the

@@ -212,7 +212,7 @@ def save(params: RVECase | Case | str | Path, batch: RVEBatch, path: str | Path)
     case = _case(params)
     path = Path(path)
     if path.suffix == ".h5":
-        write_rve_state(path, batch.take([0]), case.rve.model_dump(mode="json"))
+        write_rve_state(path, batch.take([0]), case.rve.recipe())
     elif path.suffix == ".txt":
         write_packing(path, batch.h[0], batch.s[0] @ batch.h[0].T, batch.radius[0])
     else:

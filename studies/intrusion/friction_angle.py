@@ -2,7 +2,7 @@
 
     python studies/intrusion/friction_angle.py CASE.toml RUN --out phi.json
     python studies/intrusion/friction_angle.py CASE.toml --realisations 16 --out phi.json
-        [--strain-rate RATE] [--damping ALPHA]
+        [--strain-rate RATE] [--damping ALPHA] [--rolling ALPHA_R ETA_R]
 
 Drained triaxial compression of RVE packings (the case's [triaxial] table: confining
 pressure, rate, axial strain), one batch per loading axis (`--axes`, default x y z: the
@@ -15,6 +15,8 @@ Kang et al.'s law is written for. The peak of each path is reported beside it.
 it makes (rate x the DEM step), comparable with a quasi-static coupled run's
 `strain_per_substep` (docs/coupling.md), which loads its RVEs at that strain per step.
 `--damping` replaces the local damping of the test (the packings keep the recipe's).
+`--rolling` replaces the recipe's rolling resistance ([rve] rolling_stiffness and
+rolling_friction): the packings are then generated and tested with it (--realisations).
 
 Which packings:
 - RUN: the ones the run used (RUN/packings/*.h5). A geostatic library's packings
@@ -165,7 +167,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--damping", type=float, metavar="ALPHA",
                     help="local damping during the test, instead of [rve] damping (the "
                          "packings are still prepared with the recipe's)")
+    ap.add_argument("--rolling", type=float, nargs=2, metavar=("ALPHA_R", "ETA_R"),
+                    help="rolling resistance of the recipe ([rve] rolling_stiffness, "
+                         "rolling_friction), with --realisations")
     args = ap.parse_args(argv)
+    if args.rolling is not None and args.realisations is None:
+        ap.error("--rolling makes a new recipe: give --realisations N with it")
     if (args.run is None) == (args.realisations is None):
         ap.error("give either RUN or --realisations N")
     if args.realisations is not None and args.realisations < 1:
@@ -179,6 +186,15 @@ def main(argv: list[str] | None = None) -> int:
         case.triaxial.strain_rate = args.strain_rate
     if args.damping is not None and not 0.0 <= args.damping < 1.0:
         ap.error(f"--damping {args.damping}: valid 0 <= alpha < 1")
+    if args.rolling is not None:
+        try:
+            rolled = type(case.rve).model_validate(
+                {**case.rve.model_dump(), "rolling_stiffness": args.rolling[0],
+                 "rolling_friction": args.rolling[1]})
+        except ValueError as err:  # pydantic's ValidationError: the first message
+            ap.error(f"--rolling {args.rolling[0]} {args.rolling[1]}: "
+                     f"{err.errors()[0]['msg']}")
+        case = case.model_copy(update={"rve": rolled})
     if args.realisations is not None:
         folder = args.out.with_name(f"{args.out.stem}_packings")
         tested = [(p, None) for p in realisations(case, args.realisations, folder)]
@@ -213,6 +229,8 @@ def main(argv: list[str] | None = None) -> int:
         "method": f"drained triaxial along {' '.join(args.axes)}, mean mobilised angle for "
                   f"axial strain >= {args.start}; {what}",
         "strain_rate": case.triaxial.strain_rate, "damping": case.rve.damping,
+        "rolling_stiffness": case.rve.rolling_stiffness,
+        "rolling_friction": case.rve.rolling_friction,
         "strain_per_dem_step": float(f"{strain_per_step:.3g}"),
         "case": str(args.case), "packings": [p.name for p, _ in tested]}
     if len(by_pressure) == 1:  # the paths, for comparing loadings (loading_table.py)

@@ -11,6 +11,7 @@ thread.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import tempfile
@@ -372,6 +373,16 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
     engine.advance(cpu, 10, dt, p, still)
     engine.advance(gpu, 10, dt, p, still, device="cuda")
     res["overflow"] = compare(cpu, gpu)
+
+    # 11. rolling resistance (a 6-component history) through the same shear: the
+    # moments carried through list rebuilds, capped and turned with the contact frames
+    pr = dataclasses.replace(p, rolling_stiffness=1.0, rolling_friction=0.3)
+    cpu, gpu = base.copy(), base.copy()
+    engine.advance(cpu, SHEAR_STEPS, dt, pr, ctrl)
+    engine.advance(gpu, SHEAR_STEPS, dt, pr, ctrl, device="cuda")
+    res["rolling"] = compare(cpu, gpu)
+    res["rolling"]["moment_max"] = float(np.abs(cpu.ft[..., 3:]).max())
+    res["rolling"]["history"] = [cpu.ft.shape[3], gpu.ft.shape[3]]
 
     # 7. the resident path (device_batch.py) against the per-call one: the same kernel
     # on the same data, so bitwise; then the same with a capacity overflow to regrow

@@ -152,6 +152,18 @@ def test_sheared_batch_agrees_with_cpu_through_list_rebuilds(sim):
     assert res["same_counts"] and res["same_pairs"]
 
 
+def test_rolling_resistance_agrees_with_cpu(sim):
+    """The rolling moment (kernel.contact_pass; 6 history components a slot) on the
+    device: the same shear as above with alpha_r = 1, eta_r = 0.3, moments built from
+    zero, turned, capped and carried through the list rebuilds."""
+    res = sim["rolling"]
+    assert res["history"] == [6, 6]
+    assert res["moment_max"] > 0.0
+    for name in ARRAYS:
+        assert res[name] < RTOL, (name, res[name])
+    assert res["same_counts"] and res["same_pairs"]
+
+
 @pytest.mark.validation
 def test_damping_dashpot_idle_threads_and_an_rve_without_steps(sim_long):
     res = sim_long["damped"]

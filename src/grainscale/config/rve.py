@@ -77,9 +77,38 @@ class RVEParams(StrictModel):
         1.0, gt=0, le=1, description="normal coefficient of restitution e of a binary "
         "collision (linear spring-dashpot); 1: elastic, no collisional loss")
     damping: float = Field(0.2, ge=0, lt=1, description="local non-viscous damping")
+    rolling_stiffness: float = Field(
+        0.0, ge=0, le=100, description="alpha_r in the rolling stiffness k_r = alpha_r kt "
+        "r_i r_j [N m/rad] (docs/dem.md: rolling resistance); 0: no rolling resistance")
+    rolling_friction: float = Field(
+        0.0, ge=0, le=10, description="eta_r in the cap of the rolling moment, |M_r| <= "
+        "eta_r min(r_i, r_j) f_n (with rolling_stiffness > 0)")
     seed: int = Field(1, ge=0)
     preparation: Preparation = Preparation()
     numerics: Numerics = Numerics()
+
+    def recipe(self) -> dict:
+        """The table as the key of a generated packing (coupling/materials.py): the
+        rolling keys only where rolling resistance is on, so that packings made before
+        they existed (and without them) keep their keys."""
+        key = self.model_dump(mode="json")
+        if self.rolling_stiffness == 0.0:
+            del key["rolling_stiffness"], key["rolling_friction"]
+        return key
+
+    @model_validator(mode="after")
+    def _rolling(self):
+        if self.rolling_friction > 0.0 and self.rolling_stiffness == 0.0:
+            raise ValueError(
+                f"rolling_friction = {self.rolling_friction!r} has no effect with "
+                "rolling_stiffness = 0 (rolling resistance off); valid: rolling_stiffness "
+                "in (0, 100] with it, or rolling_friction = 0")
+        if self.rolling_stiffness > 0.0 and self.rolling_friction == 0.0:
+            raise ValueError(
+                f"rolling_stiffness = {self.rolling_stiffness!r} with rolling_friction = 0 "
+                "caps every rolling moment at zero; valid: rolling_friction in (0, 10] "
+                "with it, or rolling_stiffness = 0")
+        return self
 
     @model_validator(mode="after")
     def _radii(self):

@@ -58,7 +58,7 @@ def cached_packing(params: RVEParams, k: int, cache: Path, progress: bool) -> RV
     found there is copied instead of generated, and a generated one is added to it
     (parameter studies and the test suite generate each recipe once)."""
     p = params.model_copy(update={"seed": params.seed + k})
-    key = p.model_dump(mode="json")
+    key = p.recipe()
     if cache.is_file():
         batch, stored = read_rve_state(cache)
         if stored == key:

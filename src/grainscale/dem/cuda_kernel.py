@@ -202,9 +202,11 @@ def _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref
     """Rebuild the half list of RVE r on its block (collective: every thread calls it);
     returns (status, largest row length needed), the same in every thread, as
     neighbours.build. On success s is wrapped into [0, 1), s_ref and h_ref record the
-    build, and every surviving pair keeps its history ft."""
+    build, and every surviving pair keeps its history ft (old_ft: the entries' scratch,
+    6 components a slot, room for a rolling history)."""
     n = s.shape[1]
     cap = nbr_j.shape[2]
+    hw = ft.shape[3]
     hr = h[r]
     if _min_width(hr) < 2.0 * cutoff:  # the same arithmetic in every thread
         return TOO_THIN, 0
@@ -253,9 +255,8 @@ def _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref
                 old_code[g, i, k] = (a + 1) * 9 + (b + 1) * 3 + (c + 1)
             else:
                 old_code[g, i, k] = -1
-            old_ft[g, i, k, 0] = ft[r, i, k, 0]
-            old_ft[g, i, k, 1] = ft[r, i, k, 1]
-            old_ft[g, i, k, 2] = ft[r, i, k, 2]
+            for c in range(hw):
+                old_ft[g, i, k, c] = ft[r, i, k, c]
         cnew = 0
         for j in range(i + 1, n):
             code = _nearest_image(sw, g, r, i, j, hr, radius, skin)
@@ -263,20 +264,17 @@ def _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref
                 continue
             nbr_j[r, i, cnew] = j
             nbr_shift[r, i, cnew] = code
-            ft[r, i, cnew, 0] = 0.0
-            ft[r, i, cnew, 1] = 0.0
-            ft[r, i, cnew, 2] = 0.0
+            for c in range(hw):
+                ft[r, i, cnew, c] = 0.0
             for q in range(m):
                 if old_j[g, i, q] == j and old_code[g, i, q] == code:
-                    ft[r, i, cnew, 0] = old_ft[g, i, q, 0]
-                    ft[r, i, cnew, 1] = old_ft[g, i, q, 1]
-                    ft[r, i, cnew, 2] = old_ft[g, i, q, 2]
+                    for c in range(hw):
+                        ft[r, i, cnew, c] = old_ft[g, i, q, c]
                     break
             cnew += 1
         for k in range(cnew, m):  # slots out of use hold zeros, as on the CPU
-            ft[r, i, k, 0] = 0.0
-            ft[r, i, k, 1] = 0.0
-            ft[r, i, k, 2] = 0.0
+            for c in range(hw):
+                ft[r, i, k, c] = 0.0
         nbr_count[r, i] = cnew
     cuda.syncthreads()  # every row re-mapped wrapv of others before s changes
     for i in range(tid, n, nthr):
@@ -327,9 +325,9 @@ def _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res):
 
 
 @cuda.jit(device=True)
-def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v, w, radius,
-                  mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force, torque, x, tab, ent,
-                  rev, revc, red, res, homogenise, commit, full_moduli):
+def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r, eta_r, h,
+                  s, v, w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force, torque,
+                  x, tab, ent, rev, revc, red, res, homogenise, commit, full_moduli):
     """Contact forces and torques of RVE r (kernel.contact_pass, same law and arithmetic
     per contact, the history written only if `commit`); collective. Leaves in res: [0]
     contacts, [1] sum f_n [N] and, if `homogenise`, [2..10] sum d (x) F - sum m v (x) v
@@ -337,6 +335,8 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
     part only with `full_moduli`; neither divided by V yet)."""
     n = s.shape[1]
     cap = nbr_j.shape[2]
+    hw = ft.shape[3]
+    rolling = alpha_r > 0.0
     # x = h s; the image table was filled by thread 0 from the same h
     for i in range(tid, n, nthr):
         s0 = s[r, i, 0]
@@ -379,7 +379,7 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
             dist2 = d0 * d0 + d1 * d1 + d2 * d2
             if dist2 >= rr * rr:
                 if commit:
-                    for c in range(3):
+                    for c in range(hw):
                         ft[r, i, k, c] = 0.0
                 for c in range(6):
                     ent[g, i, k, c] = 0.0  # adds nothing to j's sums
@@ -447,13 +447,49 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v
             ti0 += li * tq0
             ti1 += li * tq1
             ti2 += li * tq2
+            tj0 = lj * tq0
+            tj1 = lj * tq1
+            tj2 = lj * tq2
+            if rolling:  # the rolling moment, as kernel.contact_pass
+                m0 = ft[r, i, k, 3]
+                m1 = ft[r, i, k, 4]
+                m2 = ft[r, i, k, 5]
+                g0 = m0 + o1 * m2 - o2 * m1
+                g1 = m1 + o2 * m0 - o0 * m2
+                g2 = m2 + o0 * m1 - o1 * m0
+                gn = g0 * n0 + g1 * n1 + g2 * n2
+                a0 = w[r, j, 0] - w[r, i, 0]
+                a1 = w[r, j, 1] - w[r, i, 1]
+                a2 = w[r, j, 2] - w[r, i, 2]
+                an = a0 * n0 + a1 * n1 + a2 * n2
+                kr = alpha_r * kt * ri * rj
+                m0 = g0 - gn * n0 - kr * (a0 - an * n0) * dt
+                m1 = g1 - gn * n1 - kr * (a1 - an * n1) * dt
+                m2 = g2 - gn * n2 - kr * (a2 - an * n2) * dt
+                cap_m = eta_r * _min(ri, rj) * _max(fn, 0.0)
+                mm2 = m0 * m0 + m1 * m1 + m2 * m2
+                if mm2 > cap_m * cap_m:
+                    sc = cap_m / math.sqrt(mm2)
+                    m0 *= sc
+                    m1 *= sc
+                    m2 *= sc
+                if commit:
+                    ft[r, i, k, 3] = m0
+                    ft[r, i, k, 4] = m1
+                    ft[r, i, k, 5] = m2
+                ti0 -= m0
+                ti1 -= m1
+                ti2 -= m2
+                tj0 += m0
+                tj1 += m1
+                tj2 += m2
             # j's share, summed by j's thread after the barrier (no atomics)
             ent[g, i, k, 0] = F0
             ent[g, i, k, 1] = F1
             ent[g, i, k, 2] = F2
-            ent[g, i, k, 3] = lj * tq0
-            ent[g, i, k, 4] = lj * tq1
-            ent[g, i, k, 5] = lj * tq2
+            ent[g, i, k, 3] = tj0
+            ent[g, i, k, 4] = tj1
+            ent[g, i, k, 5] = tj2
             ncontact += 1.0
             fsum += abs(fn)  # as kernel.py: the mean normal force magnitude
             if homogenise:
@@ -730,7 +766,8 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
     jit = cuda.jit if plain else cuda.jit(max_registers=max_registers)
 
     @jit
-    def advance_kernel(nsteps, young, kt_ratio, friction, gamma, damping, skin, dt,
+    def advance_kernel(nsteps, young, kt_ratio, friction, gamma, damping, skin, alpha_r,
+                       eta_r, dt,
                        servo_gain, h, s, v, w, rot, radius, mass, inertia, L, stress,
                        stress_servo, stiffness, step_count, nbr_j, nbr_shift, nbr_count, ft,
                        s_ref, h_ref, need_rebuild, e_step, l_mean, hdot_fixed, l_ctrl,
@@ -781,9 +818,10 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                                   max_rate, hnew, hinv, Ls, tab)
                 cuda.syncthreads()
                 # 3-4. contacts, and the stress the servo reads
-                _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, h, s, v,
-                              w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force,
-                              torque, x, tab, ent, rev, revc, red, res, sample, True, False)
+                _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r,
+                              eta_r, h, s, v, w, radius, mass, Ls, nbr_j, nbr_shift,
+                              nbr_count, ft, force, torque, x, tab, ent, rev, revc, red, res,
+                              sample, True, False)
                 ncontact = res[0]
                 fsum = res[1]
                 if tid == 0:
@@ -835,10 +873,10 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                     if tid == 0:  # the last step's L, and the image table of the new cell
                         _end_frame(r, h, L, Ls, tab)
                     cuda.syncthreads()
-                    _contact_pass(r, g, tid, nthr, 0.0, young, kt_ratio, friction, gamma, h,
-                                  s, v, w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft,
-                                  force, torque, x, tab, ent, rev, revc, red, res, True, False,
-                                  not servo_on)
+                    _contact_pass(r, g, tid, nthr, 0.0, young, kt_ratio, friction, gamma,
+                                  alpha_r, eta_r, h, s, v, w, radius, mass, Ls, nbr_j,
+                                  nbr_shift, nbr_count, ft, force, torque, x, tab, ent, rev,
+                                  revc, red, res, True, False, not servo_on)
                     ncontact = res[0]
                     fsum = res[1]
                     if tid == 0:
@@ -937,7 +975,8 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
     scratch = _scratch(blocks, n, cap)
     _KERNELS[key][blocks, threads](
         d_nsteps, float(law.young), float(law.kt_ratio), float(law.friction),
-        float(law.gamma), float(law.damping), float(law.skin), float(dt), float(servo_gain),
+        float(law.gamma), float(law.damping), float(law.skin), float(law.rolling_stiffness),
+        float(law.rolling_friction), float(dt), float(servo_gain),
         *dev, *dctl, d_status, d_out, *scratch)
     return scratch
 

@@ -22,7 +22,13 @@ from grainscale.dem.kernel import (
     advance_batch,
 )
 from grainscale.dem.neighbours import Status
-from grainscale.dem.state import RVEBatch, grow_capacity
+from grainscale.dem.state import (
+    HISTORY,
+    HISTORY_ROLLING,
+    RVEBatch,
+    grow_capacity,
+    with_history,
+)
 
 
 class RVEError(RuntimeError):
@@ -44,6 +50,13 @@ class ContactParams:
     damping: float          # Cundall local non-viscous damping coefficient [0, 1); [rve]
     skin: float = 1e-3      # Verlet skin [m]
     restitution: float = 1.0  # normal coefficient of restitution e, (0, 1]; 1: elastic
+    rolling_stiffness: float = 0.0  # alpha_r in k_r = alpha_r kt r_i r_j; 0: no rolling law
+    rolling_friction: float = 0.0   # eta_r in |M_r| <= eta_r min(r_i, r_j) f_n
+
+    @property
+    def history(self) -> int:
+        """Components of a contact's history this law keeps (state.HISTORY*)."""
+        return HISTORY_ROLLING if self.rolling_stiffness > 0.0 else HISTORY
 
     @property
     def gamma(self) -> float:
@@ -150,7 +163,8 @@ def contact_law(params: ContactParams) -> ContactLaw:
     """The kernels' ContactLaw of a ContactParams."""
     return ContactLaw(float(params.young), float(params.stiffness_ratio),
                       float(params.friction), float(params.gamma), float(params.damping),
-                      float(params.skin))
+                      float(params.skin), float(params.rolling_stiffness),
+                      float(params.rolling_friction))
 
 
 def rve_arrays(batch: RVEBatch) -> RveState:
@@ -160,8 +174,20 @@ def rve_arrays(batch: RVEBatch) -> RveState:
 
 def critical_dt(batch: RVEBatch, params: ContactParams,
                 safety: float = Numerics().timestep_safety) -> float:
-    """safety x sqrt(m_min / k_max), k_max = E r_max (the stiffest possible contact) [s]."""
-    return safety * float(np.sqrt(batch.mass.min() / (params.young * batch.radius.max())))
+    """safety x sqrt(m_min / k_max), k_max = E r_max (the stiffest possible contact) [s],
+    divided by sqrt(1 + alpha_r r_max / r_min) with rolling resistance.
+
+    The rotation of grain i about an axis in a contact plane is held by the tangential
+    spring, kt l_i^2 ~ kt r_i^2, and the rolling spring, alpha_r kt r_i r_j: against its
+    inertia 0.4 m_i r_i^2 the rolling spring raises the squared frequency of that mode
+    by the factor 1 + alpha_r r_j / r_i <= 1 + alpha_r r_max / r_min over the law the
+    safety factor was chosen for (tangential springs alone, kt <= kn), so the step
+    shrinks by its square root (alpha_r = 0: unchanged)."""
+    dt = safety * float(np.sqrt(batch.mass.min() / (params.young * batch.radius.max())))
+    if params.rolling_stiffness > 0.0:
+        spread = float(batch.radius.max() / batch.radius.min())
+        dt /= math.sqrt(1.0 + params.rolling_stiffness * spread)
+    return dt
 
 
 DEVICES = ("cpu", "cuda")  # the values of `device` (case file: solver.device)
@@ -203,9 +229,17 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
 
     `batch` may also be a device_batch.DeviceBatch, whose state stays on the GPU (device
     is then "cuda" whatever is passed): only the step counts, controls and per-RVE
-    results cross, and a capacity regrowth pulls, regrows and pushes explicitly."""
+    results cross, and a capacity regrowth pulls, regrows and pushes explicitly.
+
+    A host batch whose contact history lacks the rolling moments that `params` needs
+    gets zero moments (state.with_history)."""
     resident = not isinstance(batch, RVEBatch)
     host = batch.host if resident else batch
+    if host.ft.shape[3] != params.history:
+        if resident:
+            raise ValueError(f"the device batch keeps {host.ft.shape[3]} history components "
+                             f"a contact, this contact law {params.history}")
+        with_history(host, params.history)  # zero moments, or refused if it holds some
     if resident:
         step_batch = None
     elif device == "cpu":

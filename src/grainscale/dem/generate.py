@@ -39,12 +39,18 @@ class GenerationError(ConfigError):
 
 def contact_params(params: RVEParams, friction: float | None = None,
                    damping: float | None = None) -> engine.ContactParams:
-    """The kernel's contact parameters from an [rve] table."""
+    """The kernel's contact parameters from an [rve] table. A `friction` other than the
+    table's (compaction) scales the rolling friction by the same factor, so that a
+    frictionless compaction is also free to roll (the densest packings stay reachable)."""
+    mu = params.friction if friction is None else friction
+    eta = params.rolling_friction
+    if friction is not None and params.friction > 0.0:
+        eta *= friction / params.friction
     return engine.ContactParams(
-        young=params.young_modulus, stiffness_ratio=params.stiffness_ratio,
-        friction=params.friction if friction is None else friction,
+        young=params.young_modulus, stiffness_ratio=params.stiffness_ratio, friction=mu,
         damping=params.damping if damping is None else damping,
-        skin=params.numerics.skin * params.radius_min, restitution=params.restitution)
+        skin=params.numerics.skin * params.radius_min, restitution=params.restitution,
+        rolling_stiffness=params.rolling_stiffness, rolling_friction=eta)
 
 
 def insert_random(n: int, rmin: float, rmax: float, porosity: float,
@@ -120,8 +126,8 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
     rng = np.random.default_rng(params.seed)
     h, pos, radii = insert_random(params.particles, params.radius_min, params.radius_max,
                                   prep.initial_porosity, rng)
-    batch = from_packing(h, pos, radii, params.density)
     cp = contact_params(params, damping=prep.damping)
+    batch = from_packing(h, pos, radii, params.density, history=cp.history)
     dt = engine.critical_dt(batch, cp, params.numerics.timestep_safety)
     mu = params.friction if prep.compaction_friction is None else prep.compaction_friction
 

@@ -128,6 +128,8 @@ class ContactLaw(NamedTuple):
     gamma: float     # damping ratio of the normal dashpot (0: elastic)
     damping: float   # Cundall local non-viscous damping coefficient
     skin: float      # Verlet skin [m]
+    rolling_stiffness: float  # alpha_r: k_r = alpha_r kt r_i r_j [N m/rad]; 0: off
+    rolling_friction: float   # eta_r: |M_r| <= eta_r min(r_i, r_j) max(f_n, 0)
 
 
 class Controls(NamedTuple):
@@ -221,6 +223,8 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
     Returns (number of contacts, sum of normal contact forces [N]).
     """
     young, kt_ratio, friction, gamma = law.young, law.kt_ratio, law.friction, law.gamma
+    alpha_r, eta_r = law.rolling_stiffness, law.rolling_friction
+    rolling = alpha_r > 0.0  # ft then holds 6 components a slot (engine.advance checks)
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
     nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
     force, torque, x = st.force, st.torque, st.x
@@ -247,7 +251,8 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
     ff = force.reshape(3 * n)
     tf = torque.reshape(3 * n)
     kcap = ft.shape[1]
-    ftf = ft.reshape(3 * n * kcap)
+    hw = ft.shape[2]  # history components a slot
+    ftf = ft.reshape(hw * n * kcap)
     kt_mod = kt_ratio if full_moduli else 0.0  # kt/kn in the moduli
     geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
     tab = table.reshape(81)
@@ -257,7 +262,7 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
         xi2 = x[i, 2]
         ri = radius[i]
         i3 = U3 * np.uintp(i)
-        rowk = U3 * np.uintp(kcap) * np.uintp(i)
+        rowk = np.uintp(hw) * np.uintp(kcap) * np.uintp(i)
         fi0 = fi1 = fi2 = 0.0
         ti0 = ti1 = ti2 = 0.0
         for k in range(nbr_count[i]):
@@ -265,7 +270,7 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
             t = nbr_shift[i, k]
             j3 = U3 * j
             t3 = U3 * np.uintp(t)
-            q = rowk + U3 * np.uintp(k)
+            q = rowk + np.uintp(hw) * np.uintp(k)
             d0 = xf[j3] - xi0 + tab[t3]
             d1 = xf[j3 + U1] - xi1 + tab[t3 + U1]
             d2 = xf[j3 + U2] - xi2 + tab[t3 + U2]
@@ -274,9 +279,8 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
             dist2 = d0 * d0 + d1 * d1 + d2 * d2
             if dist2 >= rr * rr:
                 if commit:
-                    ftf[q] = 0.0
-                    ftf[q + U1] = 0.0
-                    ftf[q + U2] = 0.0
+                    for c in range(hw):
+                        ftf[q + np.uintp(c)] = 0.0
                 continue
             dist = math.sqrt(dist2)
             inv2 = 1.0 / (dist * rr)  # one division serves 1/dist and 1/rr
@@ -354,9 +358,48 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
             ti0 += li * tq0
             ti1 += li * tq1
             ti2 += li * tq2
-            tf[j3] += lj * tq0
-            tf[j3 + U1] += lj * tq1
-            tf[j3 + U2] += lj * tq2
+            if rolling:
+                # rolling moment (YADE's CohesionMoment law, incremental form): turned
+                # with the contact frame as the tangential force, kept in its plane,
+                # then M -= k_r (w_j - w_i)_bend dt, capped at eta_r min(r) f_n; the
+                # torque M on j and -M on i (no force: the stress is unchanged in form)
+                r3 = q + U3
+                m0 = ftf[r3]
+                m1 = ftf[r3 + U1]
+                m2 = ftf[r3 + U2]
+                g0 = m0 + o1 * m2 - o2 * m1
+                g1 = m1 + o2 * m0 - o0 * m2
+                g2 = m2 + o0 * m1 - o1 * m0
+                gn = g0 * n0 + g1 * n1 + g2 * n2
+                a0 = wf[j3] - wf[i3]
+                a1 = wf[j3 + U1] - wf[i3 + U1]
+                a2 = wf[j3 + U2] - wf[i3 + U2]
+                an = a0 * n0 + a1 * n1 + a2 * n2
+                kr = alpha_r * kt * ri * rj
+                m0 = g0 - gn * n0 - kr * (a0 - an * n0) * dt
+                m1 = g1 - gn * n1 - kr * (a1 - an * n1) * dt
+                m2 = g2 - gn * n2 - kr * (a2 - an * n2) * dt
+                cap_m = eta_r * min(ri, rj) * max(fn, 0.0)
+                mm2 = m0 * m0 + m1 * m1 + m2 * m2
+                if mm2 > cap_m * cap_m:
+                    sc = cap_m / math.sqrt(mm2)
+                    m0 *= sc
+                    m1 *= sc
+                    m2 *= sc
+                if commit:
+                    ftf[r3] = m0
+                    ftf[r3 + U1] = m1
+                    ftf[r3 + U2] = m2
+                ti0 -= m0
+                ti1 -= m1
+                ti2 -= m2
+                tf[j3] += lj * tq0 + m0
+                tf[j3 + U1] += lj * tq1 + m1
+                tf[j3 + U2] += lj * tq2 + m2
+            else:  # the same expressions as before rolling existed: bitwise results
+                tf[j3] += lj * tq0
+                tf[j3 + U1] += lj * tq1
+                tf[j3 + U2] += lj * tq2
             ncontact += 1
             fsum += abs(fn)  # a dashpot pulls as contacts part: keep a magnitude
             if not homogenise:

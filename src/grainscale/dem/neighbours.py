@@ -87,7 +87,7 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
 
     `sw` is scratch (N,3) that receives the wrapped positions; `link` scratch (2N+1).
     On success s is wrapped into [0,1), s_ref/h_ref record the build configuration and
-    every surviving pair keeps its tangential force history.
+    every surviving pair keeps its contact history (all of ft's components).
     """
     n = s.shape[0]
     cap = nbr_j.shape[1]
@@ -129,10 +129,11 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
     if need > cap:
         return Status.OVERFLOW, need
 
-    # pass 2: write rows, carrying tangential history over (matched by j and image)
+    # pass 2: write rows, carrying the history over (matched by j and image)
+    hw = ft.shape[2]
     old_j = np.empty(cap, np.int64)
     old_code = np.empty(cap, np.int64)
-    old_ft = np.empty((cap, 3))
+    old_ft = np.empty((cap, hw))
     for i in range(n):
         m = nbr_count[i]
         for k in range(m):
@@ -144,27 +145,23 @@ def build(h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref, link, wra
             old_j[k] = j
             old_code[k] = shift_code(a, b, c) if (abs(a) <= 1 and abs(b) <= 1
                                                  and abs(c) <= 1) else -1
-            old_ft[k, 0] = ft[i, k, 0]
-            old_ft[k, 1] = ft[i, k, 1]
-            old_ft[k, 2] = ft[i, k, 2]
+            for c in range(hw):
+                old_ft[k, c] = ft[i, k, c]
         cnew = _scan(i, h, sw, radius, skin, nb, head, nxt, nbr_j, nbr_shift, True)
         nbr_count[i] = cnew
         for k in range(cnew):
             j = nbr_j[i, k]
             code = nbr_shift[i, k]
-            ft[i, k, 0] = 0.0
-            ft[i, k, 1] = 0.0
-            ft[i, k, 2] = 0.0
+            for c in range(hw):
+                ft[i, k, c] = 0.0
             for q in range(m):
                 if old_j[q] == j and old_code[q] == code:
-                    ft[i, k, 0] = old_ft[q, 0]
-                    ft[i, k, 1] = old_ft[q, 1]
-                    ft[i, k, 2] = old_ft[q, 2]
+                    for c in range(hw):
+                        ft[i, k, c] = old_ft[q, c]
                     break
         for k in range(cnew, m):  # slots out of use hold zeros: a checkpoint that cuts
-            ft[i, k, 0] = 0.0     # them off restores the same arrays
-            ft[i, k, 1] = 0.0
-            ft[i, k, 2] = 0.0
+            for c in range(hw):   # them off restores the same arrays
+                ft[i, k, c] = 0.0
     for i in range(n):
         for k in range(3):
             s[i, k] = sw[i, k]

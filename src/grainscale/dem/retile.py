@@ -42,11 +42,12 @@ def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
     (i, j, image t) becomes, for each copy c of i, the pair (i + cN, j + c'N) with
     c' = (c + t_k) mod m and new image t'_k = floor((c + t_k) / m), other components
     unchanged; it is stored in the row of the smaller index (with the image and the
-    tangential force negated when the pair is reversed). The rebuild before the next
+    history negated when the pair is reversed: the tangential force on i and the rolling
+    moment on j are each the opposite of the other grain's). The rebuild before the next
     step matches these entries by partner and image, so every contact keeps its history.
     """
     n = b.n_particles
-    out = allocate(1, m * n, b.capacity)  # grown below if a row gets longer
+    out = allocate(1, m * n, b.capacity, b.ft.shape[3])  # grown below if a row gets longer
     scale = np.ones(3)
     scale[k] = m
     out.h[0] = b.h[r] * scale[None, :]

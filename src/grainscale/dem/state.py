@@ -7,8 +7,10 @@ velocity L x is added where a relative velocity needs it).
 
 Neighbour lists are half lists with a fixed capacity K per particle: row i holds the
 particles j > i closer than r_i + r_j + skin at the last build, each with its image
-shift encoded as one byte (27 values, 13 = no shift) and its tangential contact force
-history `ft` (force on i, N). Capacity is regrown outside compiled code on overflow.
+shift encoded as one byte (27 values, 13 = no shift) and its contact history `ft`: the
+tangential force on i [N] and, with rolling resistance, the rolling moment on j [N m]
+(HISTORY_ROLLING components; without it the moments take no memory). Capacity is regrown
+outside compiled code on overflow.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
+
+HISTORY = 3          # components of a contact's history: the tangential force
+HISTORY_ROLLING = 6  # ... and the rolling moment (rolling resistance on)
 
 # per-RVE arrays that define the physical state (saved in checkpoints and .h5 files)
 STATE_FIELDS = ("h", "s", "v", "w", "rot", "radius", "mass", "inertia", "L", "stress",
@@ -49,7 +54,9 @@ class RVEBatch:
     nbr_j: np.ndarray        # (R,N,K) int32 neighbour index
     nbr_shift: np.ndarray    # (R,N,K) uint8 image shift code
     nbr_count: np.ndarray    # (R,N) int32 entries used in each row
-    ft: np.ndarray           # (R,N,K,3) tangential force history (force on i) [N]
+    ft: np.ndarray           # (R,N,K,C) contact history: [:3] tangential force on i [N];
+    #                          with rolling resistance (C = 6) [3:] the rolling moment,
+    #                          the torque on j (-it on i) [N m]
     s_ref: np.ndarray        # (R,N,3) positions at the last list build
     h_ref: np.ndarray        # (R,3,3) cell at the last list build
     need_rebuild: np.ndarray  # (R,) int32, 1 = build the list before the next step
@@ -93,8 +100,9 @@ class RVEBatch:
         return RVEBatch(**{f.name: getattr(self, f.name)[idx].copy() for f in fields(self)})
 
 
-def allocate(n_rve: int, n_particles: int, capacity: int = 16) -> RVEBatch:
-    """Zeroed arrays for a batch; identity cells."""
+def allocate(n_rve: int, n_particles: int, capacity: int = 16,
+             history: int = HISTORY) -> RVEBatch:
+    """Zeroed arrays for a batch; identity cells; `history` components per contact."""
     r, n, k = n_rve, n_particles, capacity
     eye = np.broadcast_to(np.eye(3), (r, 3, 3)).copy()
     return RVEBatch(
@@ -104,7 +112,7 @@ def allocate(n_rve: int, n_particles: int, capacity: int = 16) -> RVEBatch:
         stress_servo=np.zeros((r, 3, 3)), step_count=np.zeros(r, np.int64),
         stiffness=np.zeros((r, 3, 3)), h0=eye.copy(),
         nbr_j=np.zeros((r, n, k), np.int32), nbr_shift=np.full((r, n, k), 13, np.uint8),
-        nbr_count=np.zeros((r, n), np.int32), ft=np.zeros((r, n, k, 3)),
+        nbr_count=np.zeros((r, n), np.int32), ft=np.zeros((r, n, k, history)),
         s_ref=np.zeros((r, n, 3)), h_ref=eye.copy(), need_rebuild=np.ones(r, np.int32),
         force=np.zeros((r, n, 3)), torque=np.zeros((r, n, 3)), x=np.zeros((r, n, 3)),
         link=np.zeros((r, 2 * n + 1), np.int32), wrapv=np.zeros((r, n, 3), np.int32),
@@ -113,10 +121,11 @@ def allocate(n_rve: int, n_particles: int, capacity: int = 16) -> RVEBatch:
 
 
 def from_packing(h: np.ndarray, positions: np.ndarray, radii: np.ndarray, density: float,
-                 n_copies: int = 1, capacity: int = 16) -> RVEBatch:
-    """A batch of `n_copies` identical RVEs from a packing (cell, centres [m], radii [m])."""
+                 n_copies: int = 1, capacity: int = 16, history: int = HISTORY) -> RVEBatch:
+    """A batch of `n_copies` identical RVEs from a packing (cell, centres [m], radii [m]),
+    at rest, `history` components per contact."""
     n = len(radii)
-    b = allocate(n_copies, n, capacity)
+    b = allocate(n_copies, n, capacity, history)
     s = np.linalg.solve(h, np.asarray(positions, float).T).T
     s -= np.floor(s)
     m = density * (4.0 / 3.0) * np.pi * radii**3
@@ -201,11 +210,31 @@ def grow_capacity(b: RVEBatch, capacity: int) -> RVEBatch:
         return b
     nbr_j = np.zeros((r, n, capacity), np.int32)
     nbr_shift = np.full((r, n, capacity), 13, np.uint8)
-    ft = np.zeros((r, n, capacity, 3))
+    ft = np.zeros((r, n, capacity, b.ft.shape[3]))
     nbr_j[:, :, :k] = b.nbr_j
     nbr_shift[:, :, :k] = b.nbr_shift
     ft[:, :, :k] = b.ft
     b.nbr_j, b.nbr_shift, b.ft = nbr_j, nbr_shift, ft
+    return b
+
+
+def with_history(b: RVEBatch, history: int) -> RVEBatch:
+    """`b` with `history` components per contact (HISTORY or HISTORY_ROLLING): a batch
+    without rolling moments gets zero moments (a state with no rolling history, as a
+    packing generated without rolling resistance has); dropping moments a batch holds is
+    refused (ValueError), since its state was in equilibrium with them."""
+    c = b.ft.shape[3]
+    if c == history:
+        return b
+    if c > history:
+        if np.any(b.ft[..., history:] != 0.0):
+            raise ValueError("the batch holds rolling moments: it was made with rolling "
+                             "resistance, which this use switches off")
+        b.ft = np.ascontiguousarray(b.ft[..., :history])
+        return b
+    ft = np.zeros((*b.ft.shape[:3], history))
+    ft[..., :c] = b.ft
+    b.ft = ft
     return b
 
 

@@ -62,7 +62,7 @@ def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0,
         vn = np.einsum("ca,ca->c", vrel, n)
         mi, mj = batch.mass[r][rows_i], batch.mass[r][j]
         fn = fn - 2.0 * gamma * np.sqrt(mi * mj / (mi + mj) * kn) * vn
-    ft = batch.ft[r][rows_i, rows_k]
+    ft = batch.ft[r][rows_i, rows_k, :3]
     n, fn, ft = n[touch], fn[touch], ft[touch]
     ft = ft - np.einsum("ca,ca->c", ft, n)[:, None] * n
     cap = friction * np.maximum(fn, 0.0)

@@ -1,7 +1,7 @@
 """Drained triaxial test of a stored packing in YADE, set up as grainscale's
 element_tests.triaxial; writes the reference curves of tests/dem/test_triaxial.py.
 
-    yade -n -x yade_triaxial.py PACKING OUT [SEED [AXIAL [RATE]]]
+    yade -n -x yade_triaxial.py PACKING OUT [SEED [AXIAL [RATE [ALPHA_R ETA_R]]]]
 
 SEED >= 0 perturbs the grain velocities by ~1e-9 m/s (another realisation of the same
 RVE); -1 (default) starts at rest. Same grains and contact law (FrictMat: kn = 2 E r1 r2 /
@@ -13,6 +13,13 @@ steps: L_kk = gain (sigma* - sigma_kk)/(C_kk dt), C_kk = (1/V) sum kn |d|^2 n_k^
 every 40 steps), gain 0.05, clipped to 10 x rate. A row every 0.002 axial strain to AXIAL
 (default 0.15): axial strain, q/p, eps_v = ln(V/V0), sigma_xx, yy, zz (compression
 positive), p, q; the first row (before any step, no contacts yet) is all zero.
+
+ALPHA_R > 0 adds rolling resistance as grainscale's `[rve] rolling_stiffness` and
+`rolling_friction` define it: CohFrictMat without cohesion (alphaKr = ALPHA_R, etaRoll =
+ETA_R, no twisting stiffness) and Law2_ScGeom6D_CohFrictPhys_CohesionMoment with
+useIncrementalForm and always_use_moment_law, so k_r = ALPHA_R ks r1 r2 and |M| <=
+ETA_R min(r1, r2) |f_n|; the time step is then divided by sqrt(1 + ALPHA_R r_max / r_min)
+as grainscale's engine.critical_dt does.
 """
 import math
 import sys
@@ -22,12 +29,16 @@ from yade import O, utils
 from yade.minieigenHP import Matrix3, Vector3
 from yade.wrapper import (
     Bo1_Sphere_Aabb,
+    CohFrictMat,
     ForceResetter,
     FrictMat,
     Ig2_Sphere_Sphere_ScGeom,
+    Ig2_Sphere_Sphere_ScGeom6D,
     InsertionSortCollider,
     InteractionLoop,
+    Ip2_CohFrictMat_CohFrictMat_CohFrictPhys,
     Ip2_FrictMat_FrictMat_FrictPhys,
+    Law2_ScGeom6D_CohFrictPhys_CohesionMoment,
     Law2_ScGeom_FrictPhys_CundallStrack,
     NewtonIntegrator,
     PyRunner,
@@ -39,6 +50,8 @@ E, RATIO, MU, RHO, DAMP = 100e6, 0.8, 0.5, 2650.0, 0.2
 RATE = float(sys.argv[5]) if len(sys.argv) > 5 else 0.1
 CONF, GAIN, EVERY, MAX_RATE = 100e3, 0.05, 4, 10 * RATE
 AXIAL = float(sys.argv[4]) if len(sys.argv) > 4 else 0.15
+ALPHA_R = float(sys.argv[6]) if len(sys.argv) > 6 else 0.0
+ETA_R = float(sys.argv[7]) if len(sys.argv) > 7 else 0.0
 INTERVAL = 0.002
 
 lines = [ln for ln in open(packing) if not ln.startswith("#")]
@@ -46,8 +59,14 @@ h = np.array([float(v) for v in lines[0].split()]).reshape(3, 3)
 data = np.array([[float(v) for v in ln.split()] for ln in lines[1:] if ln.strip()])
 O.periodic = True
 O.cell.hSize = Matrix3(*h.ravel())
-mat = O.materials.append(FrictMat(young=E, poisson=RATIO, frictionAngle=math.atan(MU),
-                                  density=RHO))
+if ALPHA_R > 0.0:
+    mat = O.materials.append(CohFrictMat(
+        young=E, poisson=RATIO, frictionAngle=math.atan(MU), density=RHO,
+        isCohesive=False, momentRotationLaw=True, alphaKr=ALPHA_R, etaRoll=ETA_R,
+        alphaKtw=0.0, etaTwist=-1.0))
+else:
+    mat = O.materials.append(FrictMat(young=E, poisson=RATIO, frictionAngle=math.atan(MU),
+                                      density=RHO))
 rng = np.random.default_rng(seed) if seed >= 0 else None
 for x, y, z, r in data:
     b = utils.sphere(Vector3(x, y, z), r, material=mat)
@@ -56,11 +75,19 @@ for x, y, z, r in data:
         b.state.vel = Vector3(*rng.normal(0.0, 1e-9, 3))
 m_min = RHO * 4.0 / 3.0 * math.pi * data[:, 3].min() ** 3
 O.dt = 0.3 * math.sqrt(m_min / (E * data[:, 3].max()))
+if ALPHA_R > 0.0:
+    O.dt /= math.sqrt(1.0 + ALPHA_R * data[:, 3].max() / data[:, 3].min())
+    loop = InteractionLoop(
+        [Ig2_Sphere_Sphere_ScGeom6D()], [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys()],
+        [Law2_ScGeom6D_CohFrictPhys_CohesionMoment(useIncrementalForm=True,
+                                                   always_use_moment_law=True)])
+else:
+    loop = InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_FrictMat_FrictMat_FrictPhys()],
+                           [Law2_ScGeom_FrictPhys_CundallStrack()])
 O.engines = [
     ForceResetter(),
     InsertionSortCollider([Bo1_Sphere_Aabb()]),
-    InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_FrictMat_FrictMat_FrictPhys()],
-                    [Law2_ScGeom_FrictPhys_CundallStrack()]),
+    loop,
     NewtonIntegrator(damping=DAMP),
 ]
 l0 = h[2, 2]
