@@ -419,6 +419,29 @@ def test_adaptive_updates_are_rank_thread_independent_and_resume_bitwise(rve_cas
     assert interrupted_history(path, out, first=3, steps=9, then=2) == history
 
 
+@pytest.mark.validation
+def test_rolling_resistance_across_ranks_retiling_and_restart(rve_case, tmp_path):
+    """RVEs with rolling resistance (alpha_r = 1, eta_r = 0.2: a 6-component contact
+    history) whose cells are all doubled at their first update (the moments copied to
+    the new pairs, negated with a reversed pair): on 2 ranks stopped at step 9 and
+    resumed on 3 (the moments travel through the MPI exchange and the checkpoint's
+    parts), the history is the serial run's to the byte."""
+    case = tomllib.loads(rve_case.read_text())
+    case["rve"].update(rolling_stiffness=1.0, rolling_friction=0.2)
+    case["materials"]["sand"].update({"retile_width": 20.0, "retile_max_factor": 2})
+    path = tmp_path / "rolling.toml"
+    path.write_text(tomli_w.dumps(case))
+    ref = tmp_path / "serial"
+    assert main(["run", str(path), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
+    history = (ref / "history.csv").read_text()
+    assert history.count("\n") > 20
+    out = tmp_path / "ranks"
+    shutil.copytree(ref / "packings", out / "packings")
+    assert interrupted_history(path, out, first=2, steps=9, then=3) == history
+    sizes = meshio.read(sorted((out / "frames").glob("frame_*.vtu"))[-1]).point_data
+    assert set(np.unique(sizes["rve_particles"])) == {240.0}  # every cell doubled
+
+
 def test_ranks_know_their_place_on_the_node(tmp_path):
     """node_rank numbers the ranks of a node 0..n-1 (each picks GPU node_rank % GPUs
     under `--device cuda`, cuda_kernel.select_gpu); node_ranks counts them."""
