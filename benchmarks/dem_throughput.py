@@ -325,7 +325,7 @@ def main() -> None:
         "threads": cores, "particle_steps_per_s_all_threads": round(psp),
         "bytes_per_particle": round(mem / (args.batch * n)),
         "skin_variants_ns": {str(s): round(v, 2) for s, v, _ in rows},
-        "restitution_0.9_ns": round(ns_e, 2),
+        "restitution_0.9_ns": round(ns_e, 2), "rolling_ns": round(ns_r, 2),
         "scheduling_efficiency": {
             name: {v: round(t["ideal"] / t[v], 3) for v in ("split", "dealt", "blocks")}
             for name, t in sched.items()},

@@ -46,8 +46,8 @@ def contact_step(b, p, dt):
     """One committed evaluation of the contact law at the batch's configuration and
     spins (nothing integrated): the moment history advances by one step of dt."""
     st = kernel.rve_state(engine.rve_arrays(b), 0)
-    kernel.contact_pass(dt, engine.contact_law(p), st, np.empty((27, 3)), np.empty((3, 3)),
-                        np.empty((3, 3)), False, True)
+    kernel.contact_pass(dt, engine.contact_law(p), st, 6, np.empty((27, 3)),
+                        np.empty((3, 3)), np.empty((3, 3)), False, True)
     return b.ft[0, 0, 0, 3:].copy(), b.torque[0].copy(), b.force[0].copy()
 
 

@@ -21,7 +21,11 @@ Per step of one RVE (dt fixed), in the order the code runs:
    relative velocity includes the mean-field term D d across periodic images (D = sym L:
    the mean field carries a pair rigidly with its spin W = skew L, which only turns the
    contact frame), and particle spins w are fluctuations about W; a rigidly rotating
-   cell therefore makes no slip at any contact (objectivity).
+   cell therefore makes no slip at any contact (objectivity). With rolling resistance
+   (ContactLaw.rolling_stiffness > 0; ft then has 6 components a slot) a moment M,
+   turned and kept in the contact plane as the tangential force, is incremented by
+   -k_r (w_j - w_i)_bend dt, k_r = alpha_r kt r_i r_j, and capped at eta_r min(r_i, r_j)
+   max(f_n, 0); it acts as M on j and -M on i (docs/dem.md).
 4. in the same pass over the contacts, on servo samples: Love-Weber stress
    sigma = (1/V) sum_c d (x) f (seed Eq. 11), with f the force on the first particle and
    d = x_j - x_i, so compression is negative (tension positive), minus the kinetic
@@ -67,7 +71,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, literally, njit, prange
 
 from grainscale.dem.neighbours import Status, build, image_table
 from grainscale.linalg3 import det3, inv3
@@ -197,10 +201,11 @@ def _positions(h, s, x, force, torque):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=True,
+def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, commit=True,
                  full_moduli=False):
     """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
-    configuration; table is (27,3) scratch for the image shifts.
+    configuration; hw the history's components a slot (st.ft.shape[2]: 3, or 6 with rolling
+    resistance), given as a constant; table is (27,3) scratch for the image shifts.
 
     Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
     c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
@@ -224,7 +229,8 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
     """
     young, kt_ratio, friction, gamma = law.young, law.kt_ratio, law.friction, law.gamma
     alpha_r, eta_r = law.rolling_stiffness, law.rolling_friction
-    rolling = alpha_r > 0.0  # ft then holds 6 components a slot (engine.advance checks)
+    literally(hw)  # a compile-time constant: a width read at run time cost 10 % a step
+    rolling = hw == 6  # without it the moment's code is not compiled in
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
     nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
     force, torque, x = st.force, st.torque, st.x
@@ -251,7 +257,6 @@ def contact_pass(dt, law, st, table, stress_out, stiff_out, homogenise, commit=T
     ff = force.reshape(3 * n)
     tf = torque.reshape(3 * n)
     kcap = ft.shape[1]
-    hw = ft.shape[2]  # history components a slot
     ftf = ft.reshape(hw * n * kcap)
     kt_mod = kt_ratio if full_moduli else 0.0  # kt/kn in the moduli
     geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
@@ -566,12 +571,22 @@ def _residuals(force, v, w, mass, inertia):
     return fres, ekin
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+@njit(cache=True)
 def advance_rve(nsteps, law, st, ctl, out):
+    """_advance_rve with the history's width as a constant (one compiled kernel for the
+    plain contact law, one for rolling resistance)."""
+    if st.ft.shape[2] == 6:
+        return _advance_rve(nsteps, law, st, ctl, out, 6)
+    return _advance_rve(nsteps, law, st, ctl, out, 3)
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _advance_rve(nsteps, law, st, ctl, out, hw):
     """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
     ctl.dt [s]; see the module docstring.
 
-    `out` (5,) receives: contacts, unbalanced-force ratio, kinetic energy [J], the row
+    `hw` is the history's width (literal 3 or 6; advance_rve). `out` (5,) receives:
+    contacts, unbalanced-force ratio, kinetic energy [J], the row
     length a list build asked for, steps done. Returns a status code (0 = ok). After the
     steps (and with nsteps = -1 alone: no step) the stress, the moduli (unless a servo
     runs), contact count, unbalanced-force ratio and kinetic energy are those of the
@@ -656,9 +671,10 @@ def advance_rve(nsteps, law, st, ctl, out):
         # caller's stress is evaluated after the loop, at the end of the increment (8)
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
         if sample:  # two specialisations: the hot one keeps no stress sums live
-            ncontact, fsum = contact_pass(dt, law, st, table, stress_servo, stiffness, True)
+            ncontact, fsum = contact_pass(dt, law, st, hw, table, stress_servo, stiffness,
+                                          True)
         else:
-            ncontact, fsum = contact_pass(dt, law, st, table, stress_servo, stiff_scratch,
+            ncontact, fsum = contact_pass(dt, law, st, hw, table, stress_servo, stiff_scratch,
                                           False)
         step_count[0] += 1
         # 5. new cell, its inverse for the position update
@@ -703,7 +719,7 @@ def advance_rve(nsteps, law, st, ctl, out):
                 need_rebuild[0] = 0
         if status == Status.OK:
             stiff_out = stiff_scratch if servo_on else stiffness
-            ncontact, fsum = contact_pass(0.0, law, st, table, stress, stiff_out, True,
+            ncontact, fsum = contact_pass(0.0, law, st, hw, table, stress, stiff_out, True,
                                           False, not servo_on)
             fres, ekin = _residuals(force, v, w, mass, inertia)
             out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
