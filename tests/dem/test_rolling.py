@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numba import njit
 
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams
@@ -42,12 +43,19 @@ def pair(direction, r1=1.0e-3, r2=1.6e-3, overlap=2e-6):
     return b, n
 
 
+@njit
+def _committed_pass(dt, law, st, table, stress, stiff):
+    # the history width as the constant contact_pass takes (called from Python, each
+    # call would re-dispatch on the literal)
+    return kernel.contact_pass(dt, law, st, 6, table, stress, stiff, False, True)
+
+
 def contact_step(b, p, dt):
     """One committed evaluation of the contact law at the batch's configuration and
     spins (nothing integrated): the moment history advances by one step of dt."""
     st = kernel.rve_state(engine.rve_arrays(b), 0)
-    kernel.contact_pass(dt, engine.contact_law(p), st, 6, np.empty((27, 3)),
-                        np.empty((3, 3)), np.empty((3, 3)), False, True)
+    _committed_pass(dt, engine.contact_law(p), st, np.empty((27, 3)), np.empty((3, 3)),
+                    np.empty((3, 3)))
     return b.ft[0, 0, 0, 3:].copy(), b.torque[0].copy(), b.force[0].copy()
 
 
