@@ -268,3 +268,20 @@ def test_a_packing_with_moments_is_refused_by_a_material_without_rolling(tmp_pat
     with pytest.raises(ConfigError, match="materials.sand: a packing of its library "
                                           "holds rolling moments"):
         RVEMaterial("sand", params, [b], 1)
+
+
+def test_a_packing_file_with_moments_is_refused_without_rolling(tmp_path):
+    """`grainscale rve ... --packing` and a case's `packings`: a clear error naming the
+    file and the key, not a traceback from inside a step."""
+    from grainscale.io.packing import load_packing
+    from grainscale.io.rve_h5 import write_rve_state
+
+    b, _ = pair([1.0, 0.0, 0.0])
+    b.ft[0, 0, 0, 3:] = [0.0, 1e-9, 0.0]
+    path = tmp_path / "rolled.h5"
+    write_rve_state(path, b)
+    with pytest.raises(ConfigError, match="rolled.h5' holds rolling moments .* "
+                                          "rolling_stiffness = 0.0"):
+        load_packing(path, RVEParams())
+    again = load_packing(path, RVEParams(rolling_stiffness=1.0, rolling_friction=0.1))
+    assert again.ft.shape[3] == 6 and again.ft[0, 0, 0, 4] == 1e-9

@@ -90,11 +90,20 @@ def _numbers(text: str, path: Path, lineno: int, count: int) -> np.ndarray:
 def load_packing(path: Path, params) -> RVEBatch:  # noqa: F821 (dem.state, imported late)
     """A batch of one RVE from a .txt packing (at rest, grain density from params, an
     RVEParams) or a .h5 full state (io/rve_h5.py)."""
-    from grainscale.dem.state import from_packing
+    from grainscale.config.base import ConfigError
+    from grainscale.dem.state import HISTORY, HISTORY_ROLLING, from_packing, with_history
     from grainscale.io.rve_h5 import read_rve_state
 
     if path.suffix == ".h5":
         batch, _ = read_rve_state(path)
-        return batch.take([0])
+        width = HISTORY_ROLLING if params.rolling_stiffness > 0.0 else HISTORY
+        try:
+            return with_history(batch.take([0]), width)
+        except ValueError:
+            raise ConfigError(
+                f"packing {str(path)!r} holds rolling moments (it was made with rolling "
+                f"resistance) but [rve] rolling_stiffness = {params.rolling_stiffness}; "
+                "valid: the rolling_stiffness and rolling_friction it was made with, or a "
+                "packing made without them") from None
     h, centres, radii = read_packing(path)
     return from_packing(h, centres, radii, params.density)
