@@ -746,7 +746,8 @@ def advance_batch(nsteps, law, st, ctl, status, out):
     which thread takes it.
     """
     nthr = max(1, min(get_num_threads(), st.s.shape[0]))
-    _advance_split(nsteps, law, st, ctl, status, out, split_by_cost(nsteps, nthr))
+    split = _advance_split_rolling if st.ft.shape[3] == 6 else _advance_split
+    split(nsteps, law, st, ctl, status, out, split_by_cost(nsteps, nthr))
 
 
 @njit(cache=True)
@@ -772,8 +773,19 @@ def split_by_cost(nsteps, nthr):
 
 @njit(cache=True, parallel=True)
 def _advance_split(nsteps, law, st, ctl, status, out, bounds):
-    """advance_batch's loop: lane t advances RVEs bounds[t] .. bounds[t + 1] - 1."""
+    """advance_batch's loop: lane t advances RVEs bounds[t] .. bounds[t + 1] - 1 (the
+    plain contact law: its own function, so that compiling it never compiles the
+    rolling variant, which would double the kernels' cold compile)."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                    out[r])
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
+                                     out[r], 3)
+
+
+@njit(cache=True, parallel=True)
+def _advance_split_rolling(nsteps, law, st, ctl, status, out, bounds):
+    """_advance_split with rolling resistance (6 history components a slot)."""
+    for t in prange(bounds.shape[0] - 1):
+        for r in range(bounds[t], bounds[t + 1]):
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
+                                     out[r], 6)
