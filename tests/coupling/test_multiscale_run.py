@@ -55,6 +55,8 @@ def test_resume_continues_bitwise(case_file, tmp_path):
     assert len(a.splitlines()) > 15
 
 
+@pytest.mark.validation  # 15 s cold: it compiles the rolling kernel; the law's own
+# tests (tests/dem/test_rolling.py, the CUDA simulator's rolling case) stay in the fast tier
 def test_rolling_resistance_runs_and_resumes_bitwise(tmp_path):
     """The unit element with rolling-resistant RVEs (alpha_r = 1, eta_r = 0.2): the
     packings are generated with it (their recipe says so), the moments live in the
