@@ -30,7 +30,6 @@ import time
 
 import numpy as np
 
-from grainscale.config.base import ConfigError
 from grainscale.config.case import DEMMaterialCfg, default_update_tolerance
 from grainscale.config.rve import RVEParams
 from grainscale.coupling import predictor
@@ -47,8 +46,8 @@ from grainscale.dem.state import (
     remove_rves,
     state_arrays,
     unpadded,
-    with_history,
 )
+from grainscale.io.packing import fit_history
 from grainscale.mpm.step import SimulationError
 
 
@@ -139,15 +138,9 @@ class RVEMaterial:
         self.groups: list[RVEBatch] = []
         self.rows: list[np.ndarray] = []
         self._storage: dict[int, RVEBatch] = {}  # sphere count -> the rows its group views
-        try:  # the contact history's width: rolling moments where the law has them
-            library = [with_history(b, self.cp.history) for b in library]
-        except ValueError:
-            raise ConfigError(
-                f"materials.{name}: a packing of its library holds rolling moments (it was "
-                f"made with rolling resistance) but [rve] rolling_stiffness = "
-                f"{params.rolling_stiffness}; valid: the rolling_stiffness and "
-                "rolling_friction it was made with, or a packing made without them"
-            ) from None
+        # the contact history's width: rolling moments where the law has them
+        library = [fit_history(b, params, f"materials.{name}: a packing of its library")
+                   for b in library]
         if n_points:
             self.groups = [concatenate([library[k] for k in self.assignment])]
             self.rows = [np.arange(n_points)]

@@ -90,20 +90,29 @@ def _numbers(text: str, path: Path, lineno: int, count: int) -> np.ndarray:
 def load_packing(path: Path, params) -> RVEBatch:  # noqa: F821 (dem.state, imported late)
     """A batch of one RVE from a .txt packing (at rest, grain density from params, an
     RVEParams) or a .h5 full state (io/rve_h5.py)."""
-    from grainscale.config.base import ConfigError
-    from grainscale.dem.state import HISTORY, HISTORY_ROLLING, from_packing, with_history
+    from grainscale.dem.state import from_packing
     from grainscale.io.rve_h5 import read_rve_state
 
     if path.suffix == ".h5":
         batch, _ = read_rve_state(path)
-        width = HISTORY_ROLLING if params.rolling_stiffness > 0.0 else HISTORY
-        try:
-            return with_history(batch.take([0]), width)
-        except ValueError:
-            raise ConfigError(
-                f"packing {str(path)!r} holds rolling moments (it was made with rolling "
-                f"resistance) but [rve] rolling_stiffness = {params.rolling_stiffness}; "
-                "valid: the rolling_stiffness and rolling_friction it was made with, or a "
-                "packing made without them") from None
+        return fit_history(batch.take([0]), params, f"packing {str(path)!r}")
     h, centres, radii = read_packing(path)
     return from_packing(h, centres, radii, params.density)
+
+
+def fit_history(batch, params, what: str):
+    """`batch` with the contact-history width of the [rve] table `params` (an
+    RVEParams; state.with_history: zero moments added where rolling resistance is on);
+    a ConfigError naming `what` if it holds rolling moments that params switch off."""
+    from grainscale.config.base import ConfigError
+    from grainscale.dem.generate import contact_params
+    from grainscale.dem.state import with_history
+
+    try:
+        return with_history(batch, contact_params(params).history)
+    except ValueError:
+        raise ConfigError(
+            f"{what} holds rolling moments (it was made with rolling resistance) but [rve] "
+            f"rolling_stiffness = {params.rolling_stiffness}; valid: the rolling_stiffness "
+            "and rolling_friction it was made with, or a packing made without them"
+        ) from None
