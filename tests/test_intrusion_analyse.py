@@ -269,3 +269,18 @@ def test_to_compares_runs_of_different_depths_over_the_same_span(tmp_path, capsy
     assert code == 2 and "--to 0.05" in err and "need 4" in err
     code, out, err = run_main(capsys, [deep, "--phi", 25.0, "--from", 0.7, "--to", 0.6])
     assert code == 2 and "valid --from < --to" in err
+
+
+def test_labels_name_the_runs_in_table_and_plot(tmp_path, capsys):
+    """--labels replaces the folder names (runs of a study all named "run"), one a run;
+    another count is refused, naming the option and both counts."""
+    a = write_run(tmp_path / "a" / "run", 26.0, 3.0, seed=7)
+    b = write_run(tmp_path / "b" / "run", 26.0, 3.0, seed=8)
+    code, out, err = run_main(capsys, [a, b, "--phi", 25.0, "--labels", "4 cells",
+                                       "6 cells"])
+    assert code == 0, err
+    assert [r["label"] for r in json.loads(out.strip().splitlines()[-1])["runs"]] == \
+        ["4 cells", "6 cells"]
+    assert "4 cells" in out.splitlines()[1] and "6 cells" in out.splitlines()[2]
+    code, out, err = run_main(capsys, [a, b, "--phi", 25.0, "--labels", "one"])
+    assert code == 2 and "--labels: 1 given for 2 runs" in err

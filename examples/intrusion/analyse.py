@@ -1,14 +1,14 @@
 """Steady intrusion slope K_phi of intrusion runs against the modified Archimedes law.
 
     python examples/intrusion/analyse.py OUT [OUT2 ...] (--phi DEG | --phi-from FILE)
-        [--from D] [--to D] [--tol 0.002] [--min-span 0.4] [--png PATH]
+        [--from D] [--to D] [--tol 0.002] [--min-span 0.4] [--png PATH] [--labels L ...]
 
 Each OUT is the output folder of an intrusion run (validation case 3, seed section 4.3):
 its history.csv must have the columns depth_over_R (d/R) and force_normalized
 (p_u/(rho g R), p_u the resistance over the projected area of the quarter-model
 intruder); rows before the intrusion starts (time < 0, the geostatic stage) are left
 out. The label of a run is its folder name and, from case.resolved.toml, the intruder's
-[rigid] shape.
+[rigid] shape (`--labels` gives one label a run instead).
 
 For each run, the steady regime p_u/(rho g R) = K_phi d/R + p_0 is fitted by least
 squares over d/R in [s, d_max], d_max the deepest row (or the deepest at d/R <= --to:
@@ -170,10 +170,16 @@ def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
 
 def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             tol: float = 0.002, min_span: float = 0.4, png: Path | None = None,
-            phi_band: float | None = None, stop: float | None = None) -> dict:
+            phi_band: float | None = None, stop: float | None = None,
+            labels: list[str] | None = None) -> dict:
     if stop is not None and start is not None and start >= stop:
         raise InputError(f"--from {start:g} and --to {stop:g}: valid --from < --to")
+    if labels is not None and len(labels) != len(outs):
+        raise InputError(f"--labels: {len(labels)} given for {len(outs)} runs; give one "
+                         "a run")
     runs = [load_run(o) for o in outs]
+    for r, label in zip(runs, labels or [], strict=False):
+        r["label"] = label
     if stop is not None:  # the rows beyond --to left out, before the rule and the fit
         for r in runs:
             keep = r["x"] <= stop + 1e-12
@@ -304,11 +310,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-span", type=float, default=0.4,
                     help="shortest fitted window, in R (default 0.4)")
     ap.add_argument("--png", type=Path, default=None, help="default OUT/intrusion.png")
+    ap.add_argument("--labels", nargs="+", default=None,
+                    help="one label a run for the table and plot (default: folder names)")
     args = ap.parse_args(argv)
     try:
         phi, band = (args.phi, None) if args.phi is not None else read_phi(args.phi_from)
         summary = analyse(args.outs, phi, args.start, args.tol, args.min_span, args.png,
-                          band, args.stop)
+                          band, args.stop, args.labels)
     except (InputError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

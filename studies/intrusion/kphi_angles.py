@@ -1,0 +1,286 @@
+"""K_phi against the friction angle: the no-slip intrusion (examples/intrusion/noslip.toml)
+at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, Fig. 14).
+
+    python studies/intrusion/kphi_angles.py run ETA_R --out DIR [--shape cuboid]
+        [--threads N]
+    python studies/intrusion/kphi_angles.py collect DIR --name NAME (--eta-r ETA_R |
+        --twin-phi PHI) [--shape cuboid] [--data studies/intrusion/data/noslip]
+    python studies/intrusion/kphi_angles.py table [--data studies/intrusion/data/noslip]
+        [--png docs/img/kphi_angles.png] [--min-window 0.8]
+
+`run`: noslip.toml (or noslip_cuboid.toml) with [rve] rolling_stiffness = 1 and
+rolling_friction = ETA_R (0: no rolling resistance, the plain RVE), run into DIR, resumed
+from its newest checkpoint where DIR holds one (a stopped run goes on where it stopped).
+The angle each ETA_R gives is measured on the same [rve] table (noslip.toml's [rve] and
+[triaxial] are quick.toml's) by
+    python studies/intrusion/friction_angle.py examples/intrusion/quick.toml \
+        --realisations 8 [--rolling 1 ETA_R] --out phi.json
+whose results are studies/rolling/data/q_e0.json and q_a1_e<ETA_R>.json (PHI_FILES).
+The continuum twins are baselines.py's Mohr-Coulomb beds of the same case:
+    python studies/intrusion/baselines.py --cases noslip.toml --materials mohr_coulomb \
+        --phi PHI --out DIR
+
+`collect`: the small files of a finished run (history.csv, case.resolved.toml, cost.json)
+copied to DATA/NAME with meta.json (ETA_R or the twin's PHI), and, for a multiscale run,
+the zone carried with the intruder at d/R 1, 1.5 and 2 (examples/intrusion/stagnant.py
+--field velocity, its default --carried share) in stagnant.json: what `table` reads, so
+the table and figure are rebuilt from the repository after the run folders are gone.
+
+`table`: for each collected run, K_phi and p_0 by analyse.py's rule (window start by the
+slope-stability rule, standard errors), against Kang's law at the RVE's steady and peak
+angles (their 95 % bands); the twins at their angle. A multiscale K_phi follows an angle
+definition when it lies within 25 % of the law at that angle. Writes the figure (left:
+p_u/(rho g R) against d/R of every run with its fit; right: K_phi against phi, the
+multiscale points at their steady angle, filled, and at their peak angle, open, with
+their bands; the twins; Kang's law over 15-45 deg; the seed's point) and prints the
+table; the last line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import grainscale as gs  # noqa: E402
+from grainscale.analysis import k_phi  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+CASES = ROOT / "examples" / "intrusion"
+sys.path.insert(0, str(CASES))
+from analyse import InputError, analyse, load_run  # noqa: E402
+
+SHAPES = {"cylinder": CASES / "noslip.toml", "cuboid": CASES / "noslip_cuboid.toml"}
+DATA = HERE / "data" / "noslip"
+ALPHA_R = 1.0  # rolling stiffness: sets the DEM step, not the angle (docs/validation.md §3)
+PHI_FILES = {0.0: "q_e0.json", 0.05: "q_a1_e0.05.json", 0.1: "q_a1_e0.1.json",
+             0.15: "q_a1_e0.15.json", 0.2: "q_a1_e0.2.json", 0.3: "q_a1_e0.3.json"}
+SEED_POINT = (26.8, 1.5, 23.0)  # seed §4.3: repose angle +- its spread [deg], K_phi
+FOLLOWS = 0.25  # a K_phi "follows" an angle definition within this share of the law
+CARRIED_AT = (1.0, 1.5, 2.0)  # d/R of the carried-depth frames
+
+
+def phi_file(eta_r: float) -> Path:
+    """The measured friction angle (friction_angle.py's JSON) of the RVE with eta_r."""
+    name = PHI_FILES.get(round(eta_r, 6))
+    if name is None:
+        raise SystemExit(f"--eta-r {eta_r}: no measured angle; valid {sorted(PHI_FILES)} "
+                         "(measure another with friction_angle.py --rolling 1 ETA_R)")
+    return ROOT / "studies" / "rolling" / "data" / name
+
+
+def angle_case(eta_r: float, shape: str = "cylinder") -> gs.Case:
+    """noslip.toml (or noslip_cuboid.toml) with rolling resistance eta_r at alpha_r = 1
+    (none at eta_r = 0)."""
+    if not 0.0 <= eta_r <= 1.0:
+        raise SystemExit(f"ETA_R {eta_r}: valid 0 to 1")
+    case = gs.load_case(SHAPES[shape])
+    if eta_r > 0.0:
+        # both keys at once: each alone is refused (the [rve] table's rule)
+        case.rve = type(case.rve).model_validate(
+            {**case.rve.model_dump(), "rolling_stiffness": ALPHA_R, "rolling_friction": eta_r})
+        case.title += f", rolling resistance alpha_r {ALPHA_R:g}, eta_r {eta_r:g}"
+    return case
+
+
+def run(eta_r: float, shape: str, out: Path, threads: int | None) -> None:
+    case = angle_case(eta_r, shape).check()
+    resume = any((out / name).is_file() for name in ("checkpoint.h5", "checkpoint.prev.h5"))
+    gs.run(case, out, resume=resume, threads=threads)
+
+
+def collect(run_dir: Path, name: str, eta_r: float | None, twin_phi: float | None,
+            shape: str, data: Path) -> Path:
+    """Copy a finished run's small files to data/name with meta.json (module docstring)."""
+    if (run_dir / "run" / "history.csv").is_file():  # a baselines.py folder
+        run_dir = run_dir / "run"
+    result = gs.open_result(run_dir)
+    if result.history["time"][-1] < result.case.time.end - 1e-9:
+        raise SystemExit(f"{run_dir}: stopped at t = {result.history['time'][-1]:.4g} s "
+                         f"before time.end {result.case.time.end:g} s; finish it first")
+    to = data / name
+    to.mkdir(parents=True, exist_ok=True)
+    for f in ("history.csv", "case.resolved.toml", "cost.json"):
+        if (run_dir / f).is_file():
+            shutil.copy2(run_dir / f, to / f)
+    meta = {"shape": shape, "run": str(run_dir)}
+    if twin_phi is not None:
+        meta |= {"kind": "twin", "phi_deg": twin_phi}
+    else:
+        meta |= {"kind": "multiscale", "eta_r": eta_r,
+                 "phi_file": str(phi_file(eta_r).relative_to(ROOT))}
+        out = subprocess.run(
+            [sys.executable, str(CASES / "stagnant.py"), str(run_dir), "--field", "velocity",
+             "--depths", *map(str, CARRIED_AT), "--png", str(run_dir / "carried.png")],
+            capture_output=True, text=True, check=True).stdout
+        (to / "stagnant.json").write_text(out.strip().splitlines()[-1] + "\n")
+    (to / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
+    return to
+
+
+def fit(folder: Path, phi: float, min_window: float) -> dict:
+    """analyse.py's rule on one collected run: K_phi, p_0, their standard errors, window."""
+    try:
+        r = analyse([folder], phi, png=folder.parent / ".scratch.png")["runs"][0]
+    except InputError as err:
+        raise SystemExit(str(err)) from None
+    finally:
+        (folder.parent / ".scratch.png").unlink(missing_ok=True)
+    r["steady"] = r["window"][1] - r["window"][0] >= min_window - 1e-9
+    return r
+
+
+def rows(data: Path, min_window: float) -> list[dict]:
+    out = []
+    for meta_file in sorted(data.glob("*/meta.json")):
+        meta = json.loads(meta_file.read_text())
+        folder = meta_file.parent
+        row = {"name": folder.name, **meta}
+        if meta["kind"] == "multiscale":
+            phi = json.loads((ROOT / meta["phi_file"]).read_text())
+            row |= {"phi_deg": phi["phi_deg"], "phi_band95_deg": phi["phi_band95_deg"],
+                    "peak_phi_deg": phi["peak_phi_deg"],
+                    "peak_phi_band95_deg": phi["peak_phi_band95_deg"]}
+            stag = folder / "stagnant.json"
+            if stag.is_file():
+                row["carried"] = [{k: f[k] for k in ("depth_over_R", "carried_depth_axis",
+                                                     "carried_depth_edge")}
+                                  for f in json.loads(stag.read_text())["frames"]]
+        f = fit(folder, row["phi_deg"], min_window)
+        row |= {k: f[k] for k in ("K_phi", "K_phi_stderr", "p_0", "p_0_stderr", "window",
+                                  "window_rule", "steady", "ripple_rms_pct")}
+        row["K_kang_steady"] = k_phi(row["phi_deg"])
+        if meta["kind"] == "multiscale":
+            b, pb = row["phi_band95_deg"], row["peak_phi_band95_deg"]
+            row["K_kang_steady_band95"] = [k_phi(row["phi_deg"] - b), k_phi(row["phi_deg"] + b)]
+            row["K_kang_peak"] = k_phi(row["peak_phi_deg"])
+            row["K_kang_peak_band95"] = [k_phi(row["peak_phi_deg"] - pb),
+                                         k_phi(row["peak_phi_deg"] + pb)]
+            row["follows_steady"] = abs(row["K_phi"] / row["K_kang_steady"] - 1) <= FOLLOWS
+            row["follows_peak"] = abs(row["K_phi"] / row["K_kang_peak"] - 1) <= FOLLOWS
+        out.append(row)
+    if not out:
+        raise SystemExit(f"{data}: no collected runs (*/meta.json); see `collect`")
+    return out
+
+
+def print_table(table: list[dict]) -> None:
+    print(f"{'run':<14} {'shape':<8} {'eta_r':>5} {'phi steady':>12} {'phi peak':>12} "
+          f"{'window':>10} {'K_phi +- se':>14} {'p_0':>6} {'K/Kang st':>9} {'K/Kang pk':>9}"
+          f"  carried axis/edge at d/R 2 [m]")
+    for r in table:
+        win = f"{r['window'][0]:.2f}-{r['window'][1]:.2f}" + ("" if r["steady"] else "*")
+        if r["kind"] == "twin":
+            print(f"{r['name']:<14} {r['shape']:<8} {'MC':>5} {r['phi_deg']:>12.2f} {'':>12} "
+                  f"{win:>10} {r['K_phi']:>7.2f} +- {r['K_phi_stderr']:<4.2f} {r['p_0']:>6.1f}"
+                  f" {r['K_phi'] / r['K_kang_steady']:>9.2f}")
+            continue
+        carried = r.get("carried", [])
+        last = (f"{carried[-1]['carried_depth_axis']:.2f}/{carried[-1]['carried_depth_edge']:.2f}"
+                if carried else "-")
+        print(f"{r['name']:<14} {r['shape']:<8} {r['eta_r']:>5g} "
+              f"{r['phi_deg']:>6.2f} +-{r['phi_band95_deg']:<4.2f} "
+              f"{r['peak_phi_deg']:>6.1f} +-{r['peak_phi_band95_deg']:<4.1f} {win:>10} "
+              f"{r['K_phi']:>7.2f} +- {r['K_phi_stderr']:<4.2f} {r['p_0']:>6.1f} "
+              f"{r['K_phi'] / r['K_kang_steady']:>9.2f} {r['K_phi'] / r['K_kang_peak']:>9.2f}"
+              f"  {last}")
+    print("*: the rule's window is shorter than --min-window (not a steady slope)")
+
+
+def figure(table: list[dict], data: Path, png: Path) -> None:
+    """Left: p_u/(rho g R) against d/R of every collected run with its fit over the
+    rule's window; right: K_phi against phi (module docstring)."""
+    fig, (ax0, ax) = plt.subplots(1, 2, figsize=(12.0, 4.8))
+    for r, colour in zip(table, plt.cm.tab10.colors * 2, strict=False):
+        run = load_run(data / r["name"])
+        what = (f"eta_r {r['eta_r']:g}, {r['phi_deg']:.1f} deg" if r["kind"] == "multiscale"
+                else f"Mohr-Coulomb {r['phi_deg']:.1f} deg")
+        style = "." if r["kind"] == "multiscale" else "x"
+        ax0.plot(run["x"], run["y"], style, ms=3, color=colour,
+                 label=f"{r['shape']}, {what}: K = {r['K_phi']:.1f}")
+        xs = np.array(r["window"])
+        ax0.plot(xs, r["K_phi"] * xs + r["p_0"], "-", color=colour, lw=1.2)
+    ax0.set(xlabel="d / R", ylabel="p_u / (rho g R)", xlim=(0, None), ylim=(0, None))
+    ax0.legend(fontsize=6, loc="upper left")
+    phis = np.linspace(15.0, 45.0, 121)
+    ax.semilogy(phis, [k_phi(p) for p in phis], "k-", lw=1.2,
+                label="Kang et al. 2018 (seed Eq. 27-29)")
+    for kind, shape, mark, colour, label in (
+            ("multiscale", "cylinder", "o", "C0", "multiscale cylinder"),
+            ("multiscale", "cuboid", "s", "C1", "multiscale cuboid"),
+            ("twin", "cylinder", "^", "C2", "Mohr-Coulomb twin, cylinder"),
+            ("twin", "cuboid", "v", "C4", "Mohr-Coulomb twin, cuboid")):
+        sel = [r for r in table if r["kind"] == kind and r["shape"] == shape]
+        if not sel:
+            continue
+        k = np.array([r["K_phi"] for r in sel])
+        dk = np.array([r["K_phi_stderr"] for r in sel])
+        phi = np.array([r["phi_deg"] for r in sel])
+        dphi = np.array([r.get("phi_band95_deg", 0.0) for r in sel])
+        ax.errorbar(phi, k, xerr=dphi, yerr=dk, fmt=mark, color=colour, ms=6, capsize=2,
+                    label=f"{label}, steady angle" if kind == "multiscale" else label)
+        if kind == "multiscale":
+            ax.errorbar([r["peak_phi_deg"] for r in sel], k,
+                        xerr=[r["peak_phi_band95_deg"] for r in sel], yerr=dk, fmt=mark,
+                        mfc="none", color=colour, ms=6, capsize=2,
+                        label=f"{label}, peak angle")
+    phi_s, dphi_s, k_s = SEED_POINT
+    ax.errorbar([phi_s], [k_s], xerr=[dphi_s], fmt="*", color="C3", ms=11,
+                label="seed (repose angle 26.8 deg)")
+    ax.set(xlabel="friction angle phi (deg)", ylabel="K_phi", xlim=(15, 45))
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("eta_r", type=float)
+    r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--shape", choices=sorted(SHAPES), default="cylinder")
+    r.add_argument("--threads", type=int)
+    c = sub.add_parser("collect")
+    c.add_argument("run_dir", type=Path)
+    c.add_argument("--name", required=True)
+    g = c.add_mutually_exclusive_group(required=True)
+    g.add_argument("--eta-r", type=float)
+    g.add_argument("--twin-phi", type=float)
+    c.add_argument("--shape", choices=sorted(SHAPES), default="cylinder")
+    c.add_argument("--data", type=Path, default=DATA)
+    t = sub.add_parser("table")
+    t.add_argument("--data", type=Path, default=DATA)
+    t.add_argument("--png", type=Path, default=ROOT / "docs" / "img" / "kphi_angles.png")
+    t.add_argument("--min-window", type=float, default=0.8,
+                   help="d/R: the shortest window that counts as a steady slope")
+    args = ap.parse_args()
+    if args.cmd == "run":
+        run(args.eta_r, args.shape, args.out, args.threads)
+    elif args.cmd == "collect":
+        if args.eta_r is not None:
+            phi_file(args.eta_r)  # refused before anything is copied
+        print(collect(args.run_dir, args.name, args.eta_r, args.twin_phi, args.shape,
+                      args.data))
+    else:
+        table = rows(args.data, args.min_window)
+        print_table(table)
+        figure(table, args.data, args.png)
+        print(json.dumps({"png": str(args.png), "runs": table}))
+
+
+if __name__ == "__main__":
+    main()
