@@ -65,6 +65,7 @@ def _collected(folder, k, p0, meta, ripple=0.0):
     rows += [f"{0.1 + xi / 2:.6f},{xi:.6f},{yi:.9f}" for xi, yi in zip(x, y, strict=True)]
     (folder / "history.csv").write_text("\n".join(rows) + "\n")
     (folder / "meta.json").write_text(json.dumps(meta))
+    (folder / "case.resolved.toml").write_text("[grid]\ncell_size = 0.125\n")
 
 
 def test_table_fits_each_run_and_says_which_angle_it_follows(tmp_path):
@@ -98,3 +99,23 @@ def test_table_fits_each_run_and_says_which_angle_it_follows(tmp_path):
 def test_table_refuses_an_empty_folder(tmp_path):
     with pytest.raises(SystemExit, match="no collected runs"):
         kphi.rows(tmp_path, 0.8)
+
+
+def test_collect_refuses_an_unfinished_run_unless_partial(tmp_path):
+    """A run folder whose history stops before time.end (noslip.toml's 4.1 s) is refused,
+    naming the time; with partial=True it is collected and the d/R it reached recorded."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "case.resolved.toml").write_text((HERE / "noslip.toml").read_text())
+    rows = ["time,depth_over_R,force_normalized"]
+    rows += [f"{t:.2f},{2 * max(t - 0.1, 0) / 4:.4f},{3 + 16 * max(t - 0.1, 0) / 2:.4f}"
+             for t in np.arange(0.0, 3.01, 0.05)]
+    (run / "history.csv").write_text("\n".join(rows) + "\n")
+    data = tmp_path / "data"
+    with pytest.raises(SystemExit, match="stopped at t = 3 s before time.end 4.1 s"):
+        kphi.collect(run, "mc", None, 20.0, "cylinder", data)
+    kphi.collect(run, "mc", None, 20.0, "cylinder", data, partial=True)
+    meta = json.loads((data / "mc" / "meta.json").read_text())
+    assert meta == {"shape": "cylinder", "stopped_at_d_over_R": 1.45, "kind": "twin",
+                    "phi_deg": 20.0}
+    assert (data / "mc" / "history.csv").read_text() == (run / "history.csv").read_text()

@@ -4,7 +4,7 @@ at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, F
     python studies/intrusion/kphi_angles.py run ETA_R --out DIR [--shape cuboid]
         [--threads N]
     python studies/intrusion/kphi_angles.py collect DIR --name NAME (--eta-r ETA_R |
-        --twin-phi PHI) [--shape cuboid] [--data studies/intrusion/data/noslip]
+        --twin-phi PHI) [--shape cuboid] [--partial] [--data studies/intrusion/data/noslip]
     python studies/intrusion/kphi_angles.py table [--data studies/intrusion/data/noslip]
         [--png docs/img/kphi_angles.png] [--min-window 0.8]
 
@@ -21,7 +21,8 @@ The continuum twins are baselines.py's Mohr-Coulomb beds of the same case:
         --phi PHI --out DIR
 
 `collect`: the small files of a finished run (history.csv, case.resolved.toml, cost.json)
-copied to DATA/NAME with meta.json (ETA_R or the twin's PHI), and, for a multiscale run,
+copied to DATA/NAME with meta.json (ETA_R or the twin's PHI; with --partial, a run
+stopped before its end, and the d/R it reached), and, for a multiscale run,
 the zone carried with the intruder at d/R 1, 1.5 and 2 (examples/intrusion/stagnant.py
 --field velocity, its default --carried share) in stagnant.json: what `table` reads, so
 the table and figure are rebuilt from the repository after the run folders are gone.
@@ -43,6 +44,7 @@ import json
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import matplotlib
@@ -100,20 +102,26 @@ def run(eta_r: float, shape: str, out: Path, threads: int | None) -> None:
 
 
 def collect(run_dir: Path, name: str, eta_r: float | None, twin_phi: float | None,
-            shape: str, data: Path) -> Path:
-    """Copy a finished run's small files to data/name with meta.json (module docstring)."""
+            shape: str, data: Path, partial: bool = False) -> Path:
+    """Copy a finished run's small files to data/name with meta.json (module docstring);
+    with `partial`, a run stopped before time.end too, its last d/R recorded."""
     if (run_dir / "run" / "history.csv").is_file():  # a baselines.py folder
         run_dir = run_dir / "run"
     result = gs.open_result(run_dir)
-    if result.history["time"][-1] < result.case.time.end - 1e-9:
-        raise SystemExit(f"{run_dir}: stopped at t = {result.history['time'][-1]:.4g} s "
-                         f"before time.end {result.case.time.end:g} s; finish it first")
+    h = result.history
+    stopped = h["time"][-1] < result.case.time.end - 1e-9
+    if stopped and not partial:
+        raise SystemExit(f"{run_dir}: stopped at t = {h['time'][-1]:.4g} s before "
+                         f"time.end {result.case.time.end:g} s; finish it first (or "
+                         "--partial)")
     to = data / name
     to.mkdir(parents=True, exist_ok=True)
     for f in ("history.csv", "case.resolved.toml", "cost.json"):
         if (run_dir / f).is_file():
             shutil.copy2(run_dir / f, to / f)
-    meta = {"shape": shape, "run": str(run_dir)}
+    meta = {"shape": shape}
+    if stopped:
+        meta["stopped_at_d_over_R"] = round(float(h["depth_over_R"][-1]), 4)
     if twin_phi is not None:
         meta |= {"kind": "twin", "phi_deg": twin_phi}
     else:
@@ -145,7 +153,9 @@ def rows(data: Path, min_window: float) -> list[dict]:
     for meta_file in sorted(data.glob("*/meta.json")):
         meta = json.loads(meta_file.read_text())
         folder = meta_file.parent
-        row = {"name": folder.name, **meta}
+        row = {"name": folder.name, **meta,
+               "cell_m": tomllib.loads((folder / "case.resolved.toml").read_text())
+               ["grid"]["cell_size"]}
         if meta["kind"] == "multiscale":
             phi = json.loads((ROOT / meta["phi_file"]).read_text())
             row |= {"phi_deg": phi["phi_deg"], "phi_band95_deg": phi["phi_band95_deg"],
@@ -175,20 +185,21 @@ def rows(data: Path, min_window: float) -> list[dict]:
 
 
 def print_table(table: list[dict]) -> None:
-    print(f"{'run':<14} {'shape':<8} {'eta_r':>5} {'phi steady':>12} {'phi peak':>12} "
+    print(f"{'run':<16} {'shape':<8} {'cell':>6} {'eta_r':>5} {'phi steady':>12} {'phi peak':>12} "
           f"{'window':>10} {'K_phi +- se':>14} {'p_0':>6} {'K/Kang st':>9} {'K/Kang pk':>9}"
-          f"  carried axis/edge at d/R 2 [m]")
+          f"  carried axis/edge, last frame [m]")
     for r in table:
         win = f"{r['window'][0]:.2f}-{r['window'][1]:.2f}" + ("" if r["steady"] else "*")
         if r["kind"] == "twin":
-            print(f"{r['name']:<14} {r['shape']:<8} {'MC':>5} {r['phi_deg']:>12.2f} {'':>12} "
+            print(f"{r['name']:<16} {r['shape']:<8} {r['cell_m']:>6.3g} {'MC':>5} "
+                  f"{r['phi_deg']:>12.2f} {'':>12} "
                   f"{win:>10} {r['K_phi']:>7.2f} +- {r['K_phi_stderr']:<4.2f} {r['p_0']:>6.1f}"
                   f" {r['K_phi'] / r['K_kang_steady']:>9.2f}")
             continue
         carried = r.get("carried", [])
         last = (f"{carried[-1]['carried_depth_axis']:.2f}/{carried[-1]['carried_depth_edge']:.2f}"
                 if carried else "-")
-        print(f"{r['name']:<14} {r['shape']:<8} {r['eta_r']:>5g} "
+        print(f"{r['name']:<16} {r['shape']:<8} {r['cell_m']:>6.3g} {r['eta_r']:>5g} "
               f"{r['phi_deg']:>6.2f} +-{r['phi_band95_deg']:<4.2f} "
               f"{r['peak_phi_deg']:>6.1f} +-{r['peak_phi_band95_deg']:<4.1f} {win:>10} "
               f"{r['K_phi']:>7.2f} +- {r['K_phi_stderr']:<4.2f} {r['p_0']:>6.1f} "
@@ -215,12 +226,16 @@ def figure(table: list[dict], data: Path, png: Path) -> None:
     phis = np.linspace(15.0, 45.0, 121)
     ax.semilogy(phis, [k_phi(p) for p in phis], "k-", lw=1.2,
                 label="Kang et al. 2018 (seed Eq. 27-29)")
-    for kind, shape, mark, colour, label in (
-            ("multiscale", "cylinder", "o", "C0", "multiscale cylinder"),
-            ("multiscale", "cuboid", "s", "C1", "multiscale cuboid"),
-            ("twin", "cylinder", "^", "C2", "Mohr-Coulomb twin, cylinder"),
-            ("twin", "cuboid", "v", "C4", "Mohr-Coulomb twin, cuboid")):
-        sel = [r for r in table if r["kind"] == kind and r["shape"] == shape]
+    groups = [("multiscale", "cylinder", None, "o", "C0", "multiscale cylinder"),
+              ("multiscale", "cuboid", None, "s", "C1", "multiscale cuboid")]
+    for i, cell in enumerate(sorted({r["cell_m"] for r in table if r["kind"] == "twin"},
+                                    reverse=True)):
+        for shape, mark in (("cylinder", "^"), ("cuboid", "v")):
+            groups.append(("twin", shape, cell, mark, ("C2", "C4", "C5", "C6")[i % 4],
+                           f"Mohr-Coulomb twin, {shape}, {cell:.3g} m cells"))
+    for kind, shape, cell, mark, colour, label in groups:
+        sel = [r for r in table if r["kind"] == kind and r["shape"] == shape
+               and (cell is None or r["cell_m"] == cell)]
         if not sel:
             continue
         k = np.array([r["K_phi"] for r in sel])
@@ -262,6 +277,8 @@ def main() -> None:
     g.add_argument("--twin-phi", type=float)
     c.add_argument("--shape", choices=sorted(SHAPES), default="cylinder")
     c.add_argument("--data", type=Path, default=DATA)
+    c.add_argument("--partial", action="store_true",
+                   help="accept a run stopped before time.end (its last d/R recorded)")
     t = sub.add_parser("table")
     t.add_argument("--data", type=Path, default=DATA)
     t.add_argument("--png", type=Path, default=ROOT / "docs" / "img" / "kphi_angles.png")
@@ -274,7 +291,7 @@ def main() -> None:
         if args.eta_r is not None:
             phi_file(args.eta_r)  # refused before anything is copied
         print(collect(args.run_dir, args.name, args.eta_r, args.twin_phi, args.shape,
-                      args.data))
+                      args.data, args.partial))
     else:
         table = rows(args.data, args.min_window)
         print_table(table)
