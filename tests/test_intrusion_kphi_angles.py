@@ -113,8 +113,8 @@ def test_collect_refuses_an_unfinished_run_unless_partial(tmp_path):
     (run / "history.csv").write_text("\n".join(rows) + "\n")
     data = tmp_path / "data"
     with pytest.raises(SystemExit, match="stopped at t = 3 s before time.end 4.1 s"):
-        kphi.collect(run, "mc", None, 20.0, "cylinder", data)
-    kphi.collect(run, "mc", None, 20.0, "cylinder", data, partial=True)
+        kphi.collect(run, "mc", None, 20.0, data)
+    kphi.collect(run, "mc", None, 20.0, data, partial=True)
     meta = json.loads((data / "mc" / "meta.json").read_text())
     assert meta == {"shape": "cylinder", "stopped_at_d_over_R": 1.45, "kind": "twin",
                     "phi_deg": 20.0}

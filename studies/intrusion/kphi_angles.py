@@ -4,7 +4,7 @@ at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, F
     python studies/intrusion/kphi_angles.py run ETA_R --out DIR [--shape cuboid]
         [--threads N]
     python studies/intrusion/kphi_angles.py collect DIR --name NAME (--eta-r ETA_R |
-        --twin-phi PHI) [--shape cuboid] [--partial] [--data studies/intrusion/data/noslip]
+        --twin-phi PHI) [--partial] [--data studies/intrusion/data/noslip]
     python studies/intrusion/kphi_angles.py table [--data studies/intrusion/data/noslip]
         [--png docs/img/kphi_angles.png] [--min-window 0.8]
 
@@ -44,6 +44,7 @@ import json
 import shutil
 import subprocess
 import sys
+import tempfile
 import tomllib
 from pathlib import Path
 
@@ -102,9 +103,10 @@ def run(eta_r: float, shape: str, out: Path, threads: int | None) -> None:
 
 
 def collect(run_dir: Path, name: str, eta_r: float | None, twin_phi: float | None,
-            shape: str, data: Path, partial: bool = False) -> Path:
-    """Copy a finished run's small files to data/name with meta.json (module docstring);
-    with `partial`, a run stopped before time.end too, its last d/R recorded."""
+            data: Path, partial: bool = False) -> Path:
+    """Copy a finished run's small files to data/name with meta.json (module docstring;
+    the intruder's shape read from the run's case); with `partial`, a run stopped before
+    time.end too, its last d/R recorded."""
     if (run_dir / "run" / "history.csv").is_file():  # a baselines.py folder
         run_dir = run_dir / "run"
     result = gs.open_result(run_dir)
@@ -119,7 +121,7 @@ def collect(run_dir: Path, name: str, eta_r: float | None, twin_phi: float | Non
     for f in ("history.csv", "case.resolved.toml", "cost.json"):
         if (run_dir / f).is_file():
             shutil.copy2(run_dir / f, to / f)
-    meta = {"shape": shape}
+    meta = {"shape": "cuboid" if result.case.rigid.shape == "box" else "cylinder"}
     if stopped:
         meta["stopped_at_d_over_R"] = round(float(h["depth_over_R"][-1]), 4)
     if twin_phi is not None:
@@ -139,11 +141,10 @@ def collect(run_dir: Path, name: str, eta_r: float | None, twin_phi: float | Non
 def fit(folder: Path, phi: float, min_window: float) -> dict:
     """analyse.py's rule on one collected run: K_phi, p_0, their standard errors, window."""
     try:
-        r = analyse([folder], phi, png=folder.parent / ".scratch.png")["runs"][0]
+        with tempfile.TemporaryDirectory() as tmp:  # analyse() plots; `table` draws its own
+            r = analyse([folder], phi, png=Path(tmp) / "fit.png")["runs"][0]
     except InputError as err:
         raise SystemExit(str(err)) from None
-    finally:
-        (folder.parent / ".scratch.png").unlink(missing_ok=True)
     r["steady"] = r["window"][1] - r["window"][0] >= min_window - 1e-9
     return r
 
@@ -275,7 +276,6 @@ def main() -> None:
     g = c.add_mutually_exclusive_group(required=True)
     g.add_argument("--eta-r", type=float)
     g.add_argument("--twin-phi", type=float)
-    c.add_argument("--shape", choices=sorted(SHAPES), default="cylinder")
     c.add_argument("--data", type=Path, default=DATA)
     c.add_argument("--partial", action="store_true",
                    help="accept a run stopped before time.end (its last d/R recorded)")
@@ -290,8 +290,8 @@ def main() -> None:
     elif args.cmd == "collect":
         if args.eta_r is not None:
             phi_file(args.eta_r)  # refused before anything is copied
-        print(collect(args.run_dir, args.name, args.eta_r, args.twin_phi, args.shape,
-                      args.data, args.partial))
+        print(collect(args.run_dir, args.name, args.eta_r, args.twin_phi, args.data,
+                      args.partial))
     else:
         table = rows(args.data, args.min_window)
         print_table(table)
