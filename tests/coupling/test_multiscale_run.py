@@ -139,3 +139,28 @@ def test_unit_element_deforms_homogeneously(case_file, tmp_path):
     residual = u - A @ np.linalg.lstsq(A, u, rcond=None)[0]
     assert np.abs(residual).max() < 0.05 * np.abs(u).max()
     assert np.abs(residual[:, 2]).max() < 1e-12 * np.abs(u).max()  # axial: prescribed
+
+
+def test_a_checkpoint_the_host_cannot_hold_is_refused_before_the_first_step(
+        case_file, tmp_path, monkeypatch, capsys):
+    """A checkpoint gathers every RVE's state on the host (all of it when the RVEs live
+    on a GPU): a run whose checkpoint would take more than 80 % of the memory available
+    is refused before its first step, naming the key and both sizes, and what an
+    earlier run left in the folder is untouched. Here the machine is made to report
+    100 kB available against ~1.6 MB of state (one RVE of 120 spheres)."""
+    from grainscale.coupling import driver
+
+    out = tmp_path / "run"
+    assert main(["run", str(case_file), "--out", str(out), "--quiet", "--max-steps", "4",
+                 "--checkpoint-every", "4"]) == 0
+    before = {f.name: f.read_bytes() for f in out.iterdir() if f.is_file()}
+    monkeypatch.setattr(driver, "host_memory", lambda: 100_000)
+    capsys.readouterr()
+    assert main(["run", str(case_file), "--out", str(out), "--quiet", "--max-steps", "8",
+                 "--checkpoint-every", "4"]) != 0
+    err = capsys.readouterr().err
+    assert "output.checkpoint_every = 4" in err and "0.1 MB available" in err, err
+    assert {f.name: f.read_bytes() for f in out.iterdir() if f.is_file()} == before
+    # without checkpoints the same run goes ahead
+    assert main(["run", str(case_file), "--out", str(tmp_path / "none"), "--quiet",
+                 "--max-steps", "2"]) == 0

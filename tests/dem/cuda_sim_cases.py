@@ -28,10 +28,20 @@ from dem_helpers import agitated_dense_state, brute_pairs  # noqa: E402
 
 from grainscale.analysis import read_columns  # noqa: E402
 from grainscale.cli import main as grainscale  # noqa: E402
-from grainscale.dem import cuda_kernel, engine  # noqa: E402
+from grainscale.dem import cuda_kernel, device_batch, engine  # noqa: E402
 from grainscale.dem.device_batch import DeviceBatch  # noqa: E402
 from grainscale.dem.retile import double_cell, widths  # noqa: E402
-from grainscale.dem.state import STATE_FIELDS, RVEBatch, concatenate, from_packing  # noqa: E402
+from grainscale.dem.state import (  # noqa: E402
+    STATE_FIELDS,
+    RVEBatch,
+    concatenate,
+    from_packing,
+    grow_capacity,
+    longest_row,
+    remove_rves,
+    rve_constants,
+    with_capacity,
+)
 
 THREADS = 8  # block size: smaller than the RVEs, so threads stride over particles
 MAX_BLOCKS = cuda_kernel.MAX_BLOCKS  # restored after section 10
@@ -42,8 +52,10 @@ SMALL_RVE = {"particles": 90, "radius_min": 2.0e-3, "radius_max": 2.2e-3}
 
 
 def block_size(threads: int) -> None:
-    """Make engine.advance(device="cuda") run blocks of `threads` threads."""
+    """Make engine.advance(device="cuda") run blocks of `threads` threads, and the
+    device batch's row copies too (the simulator runs each thread as a Python thread)."""
     cuda_kernel.THREADS = threads
+    device_batch._COPY = threads
 
 
 def rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -317,11 +329,137 @@ def more_rves_than_blocks(base: RVEBatch, p: engine.ContactParams, dt: float) ->
     return res
 
 
+def _same(a: RVEBatch, b: RVEBatch, names=STATE_FIELDS) -> dict:
+    """Per state array, whether a and b hold it bitwise equal (shapes included)."""
+    return {f: bool(np.array_equal(getattr(a, f), getattr(b, f))) for f in names}
+
+
+def device_built(base: RVEBatch, p: engine.ContactParams, dt: float) -> dict:
+    """A batch built on the device from a library of two packings (base's RVEs) by an
+    assignment, against the same batch concatenated on the host and uploaded: bitwise
+    after the build, after a shear increment, after rows are taken and put back
+    swapped, removed, and the lists widened, and after a second increment; the lean
+    host's memory and the constants it keeps."""
+    lib = [base.take([0]), base.take([1])]
+    asg = np.array([1, 0, 1, 1, 0])
+    k = longest_row(lib) + 1
+    ref = concatenate([with_capacity(lib[i].copy(), k) for i in asg])
+    built = DeviceBatch.from_library(lib, asg, k)
+    up = DeviceBatch(ref.copy())
+    everything = np.arange(len(asg))
+    res = {"capacity": [base.capacity, k, built.host.capacity],
+           "build": _same(built.take(everything), ref)}
+    real = [f for f in RVEBatch.__dataclass_fields__
+            if any(getattr(built.host, f).strides)]  # placeholders have zero strides
+    res["host_bytes_per_rve"] = sum(getattr(built.host, f).nbytes for f in real) / len(asg)
+    res["state_bytes_per_rve"] = sum(getattr(ref, f).nbytes for f in STATE_FIELDS) / len(asg)
+    res["radius_placeholder_nan"] = bool(np.isnan(built.host.radius).all())
+    try:
+        built.host.s[0, 0, 0] = 0.0
+        res["placeholder_read_only"] = False
+    except ValueError:
+        res["placeholder_read_only"] = True
+    ref_c = rve_constants(ref)
+    res["constants"] = {key: bool(np.array_equal(v, ref_c[key]))
+                        for key, v in built.constants.items()}
+
+    def step(n):
+        dH = np.zeros((built.n_rve, 3, 3))
+        dH[:, 0, 1] = 3e-4
+        dH[:, 1, 1] = -2e-4
+        ctrl = engine.increment_control(up.host, dH, n, dt)
+        engine.advance(built, n, dt, p, ctrl)
+        engine.advance(up, n, dt, p, ctrl)
+        return _same(built.take(np.arange(built.n_rve)), up.pull())
+
+    res["stepped"] = step(np.array([2, 1, 3, 2, 1]))
+    res["per_rve_current"] = _same(built.host, up.host, ("h", "stress", "stiffness",
+                                                         "ncontact", "unbalanced"))
+    # rows out and back, swapped (what a cell reduction does, with a change)
+    part = built.take([3, 0])
+    built.put([0, 3], part)
+    host = up.pull()
+    host_part = host.take([3, 0])
+    for f in STATE_FIELDS:
+        getattr(host, f)[[0, 3]] = getattr(host_part, f)
+    up.push()
+    res["put"] = _same(built.take(np.arange(built.n_rve)), up.pull())
+    # rows removed (what retiling does to the RVEs that stay)
+    order = built.remove([1, 4])
+    kept, order_host = remove_rves(up.pull().copy(), [1, 4])
+    up = DeviceBatch(kept.copy())
+    res["removed"] = {"order": bool(np.array_equal(order, order_host)),
+                      **_same(built.take(np.arange(built.n_rve)), kept)}
+    res["constants_after_remove"] = bool(np.array_equal(
+        built.constants["grain_mass"], rve_constants(kept)["grain_mass"]))
+    # the lists widened on the device, against grow_capacity on the host
+    built.grow(k + 5)
+    grown = grow_capacity(up.pull().copy(), k + 5)
+    up = DeviceBatch(grown)
+    res["grown"] = _same(built.take(np.arange(built.n_rve)), up.pull())
+    res["grown_capacity"] = [built.host.capacity, int(built.arrays["ft"].shape[2])]
+    res["stepped_again"] = step(np.array([1, 2, 1]))
+    return res
+
+
+def lean_material(base: RVEBatch, p: engine.ContactParams) -> dict:
+    """An RVEMaterial on "cuda" (its batch built on the device) against one on the
+    CPU, same library and assignment: the state a checkpoint gathers (in chunks of one
+    RVE), the point fields, after two quasi-static updates in which point 0's cell is
+    squeezed below the retiling width (doubled out of the device-built group, the rest
+    staying there). CPU and GPU agree to round-off, not bitwise (module tolerance)."""
+    from grainscale.config.rve import RVEParams
+    from grainscale.coupling import rve_material
+
+    params = RVEParams(particles=24, radius_min=1.0e-3, radius_max=1.3e-3, density=2500.0,
+                       young_modulus=p.young, stiffness_ratio=p.stiffness_ratio,
+                       friction=p.friction, damping=0.0)
+    lib = [base.take([0]), base.take([1])]
+    width = float(widths(base.h).min(axis=1).min() / (2 * base.radius.mean()))
+    kw = {"mode": "quasi_static", "strain_per_substep": 0.02, "update_tolerance": 0.0,
+          "assignment": np.array([0, 1, 1, 0]), "retile_width": 0.97 * width,
+          "retile_max_factor": 2}
+    mats = {dev: rve_material.RVEMaterial("sand", params, lib, 4, device=dev, **kw)
+            for dev in ("cpu", "cuda")}
+    res = {"lean": mats["cuda"]._lean(mats["cuda"].groups[0]) is not None}
+    dH = np.zeros((4, 3, 3))
+    dH[0, 0, 0] = -0.06  # point 0: its cell narrower than the retiling width
+    dH[1:, 0, 1] = 0.01
+    stress = {dev: m.initial_stress() for dev, m in mats.items()}
+    res["initial_stress"] = rel(stress["cpu"], stress["cuda"])
+    chunk = rve_material.CHUNK_BYTES
+    for _ in range(2):
+        for dev, m in mats.items():
+            m.update(dH, 1e-3, stress[dev])
+    rve_material.CHUNK_BYTES = 1  # one RVE per chunk
+    try:
+        states = {dev: m.state() for dev, m in mats.items()}
+    finally:
+        rve_material.CHUNK_BYTES = chunk
+    res["groups"] = [[b.n_particles for b in m.groups] for m in mats.values()]
+    res["retiled"] = [m.retiled for m in mats.values()]
+    res["stress"] = rel(stress["cpu"], stress["cuda"])
+    res["state"] = {key: rel(np.asarray(states["cpu"][key], float),
+                             np.asarray(states["cuda"][key], float))
+                    for key in ("rve_s", "rve_v", "rve_h", "rve_stress", "rve_nbr_count",
+                                "rve_particles")}
+    # the lists' content, whatever the rows' order (the device orders them by j)
+    res["ft"] = [ft_diff(mats["cpu"].rve(i), mats["cuda"].rve(i)) for i in range(4)]
+    fields = {dev: m.point_fields() for dev, m in mats.items()}
+    res["fields"] = {key: rel(fields["cpu"][key], fields["cuda"][key])
+                     for key in fields["cpu"]}
+    res["wave_speed"] = rel(np.array([mats["cpu"].wave_speed()]),
+                            np.array([mats["cuda"].wave_speed()]))
+    res["rve"] = rel(mats["cpu"].rve(2).s, mats["cuda"].rve(2).s)
+    return res
+
+
 def main(parts: list[str]) -> None:
-    """parts: "kernel" (sections 1, 2, 7, 9 and 10: shear through rebuilds, capacity
-    overflow, the resident path, scratch kept per shape, more RVEs than blocks; tiny
-    batches, the fast tier), "kernel_more" (sections 3-6:
-    momentum, damping and idle threads, reverse-list overflow, spread radii) and/or
+    """parts: "kernel" (sections 1, 2, 7, 9, 10 and 12: shear through rebuilds, capacity
+    overflow, the resident path, scratch kept per shape, more RVEs than blocks, a batch
+    built on the device; tiny batches, the fast tier), "kernel_more" (sections 3-6 and
+    13: momentum, damping and idle threads, reverse-list overflow, spread radii, a
+    material built on the device) and/or
     "coupled" (section 8, the `grainscale run` cases, minutes on the simulator)."""
     t0 = time.perf_counter()
     res: dict = {"available": cuda_kernel.is_available()}
@@ -394,6 +532,9 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
     res["alternating"] = alternating_shapes(base, p, dt)
     res["alternating"]["seconds"] = time.perf_counter() - t0
 
+    # 12. a batch built on the device from a library, kept there (device_batch.py)
+    res["device_built"] = device_built(base, p, dt)
+
     # 10. a block's scratch reused by the RVEs it runs one after another
     t0 = time.perf_counter()
     res["blocks"] = more_rves_than_blocks(base, p, dt)
@@ -401,7 +542,8 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
 
 
 def more_cases(base, p, dt, ctrl, still, res) -> None:
-    """Sections 3-6, and section 1's shear run twice on the device: bitwise the same."""
+    """Sections 3-6 and 13, and section 1's shear run twice on the device: bitwise the
+    same."""
     first, again = base.copy(), base.copy()
     engine.advance(first, SHEAR_STEPS, dt, p, ctrl, device="cuda")
     engine.advance(again, SHEAR_STEPS, dt, p, ctrl, device="cuda")
@@ -477,6 +619,9 @@ def more_cases(base, p, dt, ctrl, still, res) -> None:
     common = 2.0 * gpu.radius.max() + pw.skin
     res["wide"]["common"] = len(brute_pairs(gpu.h[0], gpu.s[0] - np.floor(gpu.s[0]),
                                             gpu.radius[0], lambda i, j: np.full(len(i), common)))
+
+    # 13. an RVEMaterial whose batch is built on the device, against one on the CPU
+    res["lean_material"] = lean_material(base, p)
 
 
 if __name__ == "__main__":

@@ -221,13 +221,33 @@ def test_momentum_is_conserved_in_a_fixed_periodic_cell(sim_long):
     assert sim_long["force_sum_rel"] < 1e-13
 
 
+@pytest.mark.validation
+def test_a_material_built_on_the_device_agrees_with_the_cpu(sim_long):
+    """RVEMaterial with device "cuda" builds its batch on the device (lean host) and
+    still does all a run needs: two quasi-static updates of 4 points in which point 0's
+    cell is squeezed below the retiling width (taken from the device, doubled, the rest
+    staying there), the state a checkpoint gathers in chunks (one RVE each here), the
+    point fields from the per-RVE constants, the wave speed and one RVE for a probe:
+    equal to the CPU material's to the module's round-off tolerance."""
+    res = sim_long["lean_material"]
+    assert res["lean"]
+    assert res["groups"] == [[24, 48], [24, 48]] and res["retiled"] == [1, 1]
+    for key in ("initial_stress", "stress", "wave_speed", "rve"):
+        assert res[key] < RTOL, (key, res[key])
+    for key, value in {**res["state"], **res["fields"]}.items():
+        assert value < RTOL, (key, value)
+    for same_pairs, diff in res["ft"]:
+        assert same_pairs and diff < RTOL
+
+
 @pytest.mark.parametrize("case", ["resident", "resident_overflow"])
 def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
     """State kept on the device across two increments (device_batch.py) against the
     same calls copying the state down and up each time: the same kernel on the same
     data, so every array agrees bitwise; the second case starts with a capacity of 3,
-    regrown through pull, grow, push. Only the small per-RVE results crossed each
-    call: at most the issue's 1 KB per RVE and MPM step (measured 468 B, 2 RVEs)."""
+    widened on the device (DeviceBatch.grow) and on the host alike. Only the small
+    per-RVE results crossed each call: at most the issue's 1 KB per RVE and MPM step
+    (measured 468 B, 2 RVEs)."""
     res = sim[case]
     assert res["same_results"]
     assert res["stale_before_pull"]  # positions really stayed on the device
@@ -240,6 +260,31 @@ def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
     if case == "resident_overflow":
         assert start == 3 and resident > start
     assert res["bytes_per_rve_call"] <= 1024
+
+
+def test_a_batch_built_on_the_device_equals_the_uploaded_one_bitwise(sim):
+    """DeviceBatch.from_library (two 24-sphere packings copied on the device by an
+    assignment of 5 RVEs) against the same batch concatenated on the host and uploaded:
+    every state array bitwise equal after the build, after a shear increment, after
+    rows are taken and put back swapped, after two rows are removed (the order of
+    state.remove_rves), after the lists are widened on the device (grow_capacity's
+    result) and after a second increment: the device copies, gathers, scatters and
+    moves rows exactly. The host keeps only the per-RVE arrays (~540 B an RVE, against
+    ~10 kB of state for these 24 spheres): its per-sphere arrays are read-only NaN
+    placeholders, so a read that forgets the device cannot pass for data."""
+    res = sim["device_built"]
+    for stage in ("build", "stepped", "per_rve_current", "put", "removed", "grown",
+                  "stepped_again"):
+        assert all(res[stage].values()), (stage, res[stage])
+    assert all(res["constants"].values()) and res["constants_after_remove"]
+    start, capacity, built = res["capacity"]
+    assert capacity == built < start  # the longest row plus one slot, not the 16
+    assert res["grown_capacity"] == [capacity + 5] * 2
+    # per RVE: 7 (3,3) float64 arrays (504 B) and 4 counters of 8 B (step_count,
+    # unbalanced, kinetic) or 4 B (need_rebuild, ncontact): 536 B
+    assert res["host_bytes_per_rve"] == 536
+    assert res["state_bytes_per_rve"] > 15 * res["host_bytes_per_rve"]
+    assert res["radius_placeholder_nan"] and res["placeholder_read_only"]
 
 
 def test_groups_of_two_sizes_updated_in_turn_keep_their_scratch(sim):

@@ -257,6 +257,46 @@ def discard_outputs(out: Path) -> None:
             f.unlink(missing_ok=True)
 
 
+CHECKPOINT_SHARE = 0.8  # of the host memory available at the start a checkpoint may take
+
+
+def host_memory() -> int:
+    """Bytes of memory this machine has available now (MemAvailable; without
+    /proc/meminfo, its physical memory)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _size(n: float) -> str:
+    """Bytes for a message: '1.6 MB', '137.2 GB'."""
+    return f"{n / 1e9:.1f} GB" if n >= 1e9 else f"{n / 1e6:.1f} MB"
+
+
+def check_checkpoint_memory(s: MPMState, every: int, comm: Comm,
+                            available: int | None = None) -> None:
+    """Refuse, before the first step, a run whose checkpoints cannot be written: a
+    checkpoint gathers each rank's RVE state on its host (for RVEs on a GPU, all of it,
+    in chunks), so it must fit CHECKPOINT_SHARE of the memory available (`available`,
+    default host_memory()). ConfigError on every rank alike, with the sizes."""
+    if not every:
+        return
+    need = sum(m.checkpoint_bytes() for m in s.materials if hasattr(m, "checkpoint_bytes"))
+    available = host_memory() if available is None else available
+    worst = float(comm.max(np.array([need / max(available, 1)]))[0])
+    if worst > CHECKPOINT_SHARE:
+        raise ConfigError(
+            f"output.checkpoint_every = {every} (--checkpoint-every): a checkpoint gathers "
+            f"the RVEs' state on the host, {_size(need)} on this rank, and this machine has "
+            f"{_size(available)} available ({worst:.0%} of it on the fullest rank; "
+            f"at most {CHECKPOINT_SHARE:.0%} allowed); valid: 0 (no checkpoints), or more "
+            "ranks (MPI) so that each holds fewer RVEs")
+
+
 def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_steps,
          steps_this_run, every: int, found: checkpoints.Checkpoint | None,
          progress: bool, probes: list[Probe], on_step=None) -> int:
@@ -268,6 +308,7 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     for mat, ids in zip(s.materials, s.mat_points, strict=True):
         if hasattr(mat, "initial_stress") and getattr(mat, "n_rve", 0):
             s.points.stress[slice(None) if ids is None else ids] = mat.initial_stress()
+    check_checkpoint_memory(s, every, comm)
     if root:
         (out / "frames").mkdir(exist_ok=True)
         (out / "case.resolved.toml").write_text(resolved_toml(case))

@@ -20,7 +20,10 @@ With device "cuda" the RVEs' state stays on the GPU for the whole run
 (dem/device_batch.py): each update sends the increments down and brings the stress,
 stiffness, cell and counts up; the rest of the state comes to the host only where it is
 read (`state` for checkpoints, `rve` for probes, cell reduction and retiling of the RVEs
-concerned), through `_sync` and `_sync_rows`.
+concerned). The batch is built there (DeviceBatch.from_library: the library's packings
+copied on the device by the assignment), so the host never holds the RVEs' per-sphere
+state, only a lean mirror of their per-RVE arrays; rows are read and written on the
+device (`take`, `put`, `remove`), and a checkpoint gathers the state in chunks.
 """
 
 from __future__ import annotations
@@ -42,8 +45,10 @@ from grainscale.dem.state import (
     extend,
     from_state_arrays,
     grow_capacity,
+    longest_row,
     padded,
     remove_rves,
+    rve_constants,
     state_arrays,
     unpadded,
 )
@@ -62,6 +67,26 @@ def _sym(sigma: np.ndarray) -> np.ndarray:
 
 
 _DEM = DEMMaterialCfg(type="dem")  # the case file's defaults are the only ones
+
+
+SLOT_MARGIN = 1  # list slots a device-built batch gets beyond the library's longest row
+CHUNK_BYTES = 256 * 2**20  # a checkpoint gathers a device-built batch this much at a time
+
+
+def list_capacity(library: list[RVEBatch]) -> int:
+    """Neighbour slots per sphere of a batch built on the device: the packings' longest
+    row plus SLOT_MARGIN (a row that outgrows it regrows the lists on the device,
+    engine.advance); the packings' own capacity where they hold no lists yet."""
+    longest = longest_row(library)
+    if longest == 0:
+        return max(b.capacity for b in library)
+    return longest + SLOT_MARGIN
+
+
+def rve_state_bytes(batch: RVEBatch) -> int:
+    """Bytes of one RVE's state (state.STATE_FIELDS) in a group like `batch`."""
+    return sum(getattr(batch, name).itemsize * int(np.prod(getattr(batch, name).shape[1:]))
+               for name in STATE_FIELDS)
 
 
 def _counts(state: dict[str, np.ndarray]) -> np.ndarray:
@@ -141,7 +166,14 @@ class RVEMaterial:
         # the contact history's width: rolling moments where the law has them
         library = [fit_history(b, params, f"materials.{name}: a packing of its library")
                    for b in library]
-        if n_points:
+        if n_points and device == "cuda":
+            from grainscale.dem.device_batch import DeviceBatch
+
+            dev = DeviceBatch.from_library(library, self.assignment, list_capacity(library))
+            self.groups = [dev.host]
+            self._dev[id(dev.host)] = dev
+            self.rows = [np.arange(n_points)]
+        elif n_points:
             self.groups = [concatenate([library[k] for k in self.assignment])]
             self.rows = [np.arange(n_points)]
         self.density = bulk_density(library)
@@ -167,9 +199,9 @@ class RVEMaterial:
         # balance over ranks
         self.work = np.zeros(n_points)
         for b in self.groups:
-            engine.refresh(b, self.cp)
+            engine.refresh(self._device(b), self.cp)
         if n_points:
-            self.theta_prev = self._per_point(homogenise.mean_rotation)
+            self.theta_prev = self._mean_rotation()
 
     @property
     def n_rve(self) -> int:
@@ -188,10 +220,22 @@ class RVEMaterial:
             dev = self._dev[id(batch)] = DeviceBatch(batch)
         return dev
 
+    def _lean(self, batch: RVEBatch):
+        """The DeviceBatch of a group built on the device (lean host mirror), else None."""
+        dev = self._dev.get(id(batch))
+        return dev if dev is not None and dev.host is batch and dev.lean else None
+
+    def _constant(self, batch: RVEBatch, key: str) -> np.ndarray:
+        """(R,) state.rve_constants[key] of a group (from the device batch if lean)."""
+        dev = self._lean(batch)
+        return dev.constants[key] if dev is not None else rve_constants(batch)[key]
+
     def _sync(self) -> None:
-        """Bring every group's full state to the host (device "cuda"; no-op on the CPU)."""
+        """Bring the full state of every group uploaded from the host back to it (device
+        "cuda"; no-op on the CPU); groups built on the device stay there."""
         for dev in self._dev.values():
-            dev.pull()
+            if not dev.lean:
+                dev.pull()
 
     def _forget_devices(self) -> None:
         """Drop the device copies of groups that are gone (after retiling or loading);
@@ -209,14 +253,16 @@ class RVEMaterial:
 
     @property
     def batch(self) -> RVEBatch | None:
-        """All RVEs as one batch, in point order, while they have one size (scripts)."""
+        """All RVEs as one batch, in point order, while they have one size (scripts); a
+        batch built on the GPU comes as a host copy (changing it changes nothing)."""
         if not self.groups:
             return None
         self._sync()
         if len(self.groups) > 1:
             raise ValueError(f"material {self.name!r}: RVEs of {len(self.groups)} sizes "
                              "(cells were retiled); use .groups")
-        return self.groups[0]
+        dev = self._lean(self.groups[0])
+        return dev.take(np.arange(dev.n_rve)) if dev is not None else self.groups[0]
 
     def rve(self, point: int) -> RVEBatch:
         """A copy of the RVE of `point` (an index into this process's points of the
@@ -226,7 +272,7 @@ class RVEMaterial:
             hit = np.flatnonzero(rows == point)
             if hit.size:
                 if id(b) in self._dev:
-                    self._dev[id(b)].pull(hit)
+                    return self._dev[id(b)].take(hit)
                 return b.take(hit)
         raise IndexError(f"material {self.name!r}: no RVE for point {point} here")
 
@@ -355,9 +401,9 @@ class RVEMaterial:
             return
         todo = np.flatnonzero(lattice.needs_reduction(batch.h, lattice.REDUCE_TOL))
         if todo.size:
-            target.pull(todo)
-            lattice.reduce_cells(batch)
-            target.push(todo)
+            part = target.take(todo)
+            lattice.reduce_cells(part)
+            target.put(todo, part)
 
     def _mean_rotation(self, due: np.ndarray | None = None) -> np.ndarray:
         """(P,) homogenise.mean_rotation of each point's RVE, on the GPU where it lives;
@@ -380,7 +426,7 @@ class RVEMaterial:
         if self.device == "cuda":  # the cells are current on the host, the rest is not
             if not any(self._thin(b, retile.widths(b.h)).any() for b in self.groups):
                 return
-            self._sync()
+            self._sync()  # the groups uploaded from the host; those built there: below
         # by sphere count: the groups as they stay, and the cells doubled into each
         kept: dict[int, tuple[RVEBatch, np.ndarray]] = {}
         doubled: dict[int, list[tuple[RVEBatch, int]]] = {}
@@ -392,12 +438,19 @@ class RVEMaterial:
                 kept[n] = (batch, rows)
                 continue
             idx = np.flatnonzero(thin)
-            for r in idx:
+            dev = self._lean(batch)
+            cells = dev.take(idx) if dev is not None else batch.take(idx)
+            for i, r in enumerate(idx):
                 doubled.setdefault(2 * n, []).append(
-                    (retile.double_cell(batch, r, int(np.argmin(w[r]))), int(rows[r])))
+                    (retile.double_cell(cells, i, int(np.argmin(w[r]))), int(rows[r])))
                 self.retiled += 1
             if idx.size < batch.n_rve:  # the rest stays where it is: no whole-group copy
-                rest, order = remove_rves(batch, idx)
+                if dev is not None:  # rows removed on the device, the batch stays there
+                    order = dev.remove(idx)
+                    rest = dev.host
+                    self._dev[id(rest)] = dev
+                else:
+                    rest, order = remove_rves(batch, idx)
                 kept[n] = (rest, rows[order])
         if not doubled:
             return
@@ -424,7 +477,8 @@ class RVEMaterial:
     def _thin(self, batch: RVEBatch, widths: np.ndarray) -> np.ndarray:
         """(R,) cells of a group narrower than retile_width mean grain diameters, from
         their perpendicular widths (R,3) (retile.widths)."""
-        return widths.min(axis=1) < self.retile_width * 2.0 * batch.radius.mean(axis=1)
+        return widths.min(axis=1) < (self.retile_width * 2.0
+                                     * self._constant(batch, "mean_radius"))
 
     def initial_stress(self) -> np.ndarray:
         """(P,3,3) sym(sigma) of the prepared RVEs' Love-Weber stress [Pa] (see update)."""
@@ -451,7 +505,7 @@ class RVEMaterial:
         speed = 0.0
         for b in self.groups:
             c = np.diagonal(b.stiffness, axis1=1, axis2=2).max(axis=1)
-            rho = b.mass.sum(axis=1) / b.volume()
+            rho = self._constant(b, "grain_mass") / b.volume()
             speed = max(speed, float(np.sqrt(c / rho).max()))
         return speed
 
@@ -466,13 +520,14 @@ class RVEMaterial:
             n = max(b.n_particles for b in self.groups)
             # the capacity only grows (retiling, overflows): tables cut to the rows'
             # longest count are several times smaller
-            k = max(max(int(b.nbr_count.max(initial=0)) for b in self.groups), 1)
+            k = max(max(self._longest_row(b) for b in self.groups), 1)
             arrays = {}
             for b, rows in zip(self.groups, self.rows, strict=True):
-                for name, v in padded(state_arrays(b), n, k).items():
-                    if name not in arrays:
-                        arrays[name] = np.empty((self.n_points, *v.shape[1:]), v.dtype)
-                    arrays[name][rows] = v
+                for at, part in self._chunks(b):
+                    for name, v in padded(state_arrays(part), n, k).items():
+                        if name not in arrays:
+                            arrays[name] = np.empty((self.n_points, *v.shape[1:]), v.dtype)
+                        arrays[name][rows[at]] = v
                 capacity[rows] = b.capacity
             counts = self.particle_counts()
         else:
@@ -489,6 +544,30 @@ class RVEMaterial:
         out["deferred"] = self.deferred.copy()
         out["t_acc"] = self.t_acc.copy()
         return out
+
+    def _longest_row(self, batch: RVEBatch) -> int:
+        """The most neighbour entries a sphere of a group holds."""
+        dev = self._lean(batch)
+        if dev is None:
+            return longest_row([batch])
+        return int(dev.pull_field("nbr_count").max(initial=0))
+
+    def _chunks(self, batch: RVEBatch):
+        """(rows, batch of those rows) covering a group: the group itself in one piece,
+        or, built on the device, host copies of CHUNK_BYTES of state at a time."""
+        dev = self._lean(batch)
+        if dev is None:
+            yield slice(None), batch
+            return
+        step = max(1, CHUNK_BYTES // max(rve_state_bytes(batch), 1))
+        for start in range(0, batch.n_rve, step):
+            at = np.arange(start, min(start + step, batch.n_rve))
+            yield at, dev.take(at)
+
+    def checkpoint_bytes(self) -> int:
+        """Bytes of RVE state a checkpoint of this process gathers on the host (at the
+        lists' capacity: an upper bound)."""
+        return sum(b.n_rve * rve_state_bytes(b) for b in self.groups)
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
         arrays = {k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS}
@@ -529,7 +608,8 @@ class RVEMaterial:
             if dev is not None and dev.host is batch:
                 dev.pull_field("step_count")
         return {
-            "porosity": self._per_point(lambda b: b.porosity()),
+            "porosity": self._per_point(
+                lambda b: 1.0 - self._constant(b, "solid_volume") / b.volume()),
             "coordination": self._per_point(homogenise.coordination),
             "mean_rotation": self.theta_prev.copy(),  # the last update's (or loaded)
             "rotation_rate": self.spin_rate.copy(),

@@ -15,6 +15,16 @@ so after a call `host.h`, `host.stress`, `host.stiffness`, `host.ncontact`,
 Whatever needs the rest (a checkpoint, a probe frame, cell reduction, retiling, a
 capacity regrowth) calls `pull` first, explicitly, and `push` after changing the host
 state. `moved` counts the bytes that crossed, both ways.
+
+A batch built on the device (`from_library`: copies of a few packings placed there by a
+per-point assignment) never has its per-sphere state on the host: its `host` is *lean*,
+holding the per-RVE arrays (cell, stress, moduli, counters: ~540 B an RVE) and, for every
+per-sphere array, a read-only placeholder of the right shape and no memory (NaN, or -1
+for integers), so that a read that forgot the device shows as NaN or an error instead
+of stale numbers. Its rows are read and written through `take` and `put` (gathered and
+scattered on the device, so only the rows asked for cross), `remove` drops rows on the
+device, `grow` widens the neighbour lists there, and the constants that per-RVE
+quantities need (mean radius, grain mass, solid volume) are kept per RVE.
 """
 
 from __future__ import annotations
@@ -23,13 +33,80 @@ import numpy as np
 from numba import cuda, float64
 
 from grainscale.dem import cuda_kernel
-from grainscale.dem.state import RVEBatch
+from grainscale.dem.state import (
+    SPHERE_AXIS_FIELDS,
+    RVEBatch,
+    allocate,
+    concatenate,
+    grow_capacity,
+    rve_constants,
+    with_capacity,
+)
 
 STATE_ARGS = cuda_kernel.STATE_ARGS
 CONTROL_ARGS = cuda_kernel.CONTROL_ARGS
 UP_EACH_CALL = ("h", "stress", "stiffness")  # host copies kept current by every call
 ALWAYS_SENT = ("e_step", "l_mean")  # the controls of an increment; others when non-zero
 _REDUCE = 128  # threads of the per-RVE reductions below
+_COPY = 128  # threads of the row and slot copies below
+
+
+@cuda.jit
+def _copy_rows(src, src_rows, dst, dst_rows):
+    """dst[dst_rows[i], :] = src[src_rows[i], :] for every i (2-D views of state arrays:
+    a gather, a scatter or a move of rows within one array). One block per i."""
+    i = cuda.blockIdx.x
+    a = src_rows[i]
+    b = dst_rows[i]
+    for k in range(cuda.threadIdx.x, src.shape[1], cuda.blockDim.x):
+        dst[b, k] = src[a, k]
+
+
+@cuda.jit
+def _copy_slots(src, dst, fill):
+    """dst[m, k, c] = src[m, k, c] for the K slots src has, `fill` for the slots beyond
+    (views (rows, slots, components) of a neighbour array, dst the wider one). One block
+    per m."""
+    m = cuda.blockIdx.x
+    k_src = src.shape[1]
+    per = dst.shape[1] * dst.shape[2]
+    for q in range(cuda.threadIdx.x, per, cuda.blockDim.x):
+        k = q // dst.shape[2]
+        c = q % dst.shape[2]
+        if k < k_src:
+            dst[m, k, c] = src[m, k, c]
+        else:
+            dst[m, k, c] = fill
+
+
+def _rows2d(a):
+    """A (R, everything else) view of a C-contiguous device array."""
+    size = 1
+    for d in a.shape[1:]:
+        size *= d
+    return a.reshape(a.shape[0], size)
+
+
+def _placeholder(shape: tuple, dtype) -> np.ndarray:
+    """A read-only array of `shape` that takes no memory: NaN (integers: -1, unsigned
+    ones their largest value)."""
+    dtype = np.dtype(dtype)
+    fill = np.nan if dtype.kind == "f" else np.iinfo(dtype).max if dtype.kind == "u" else -1
+    return np.broadcast_to(np.array(fill, dtype), shape)
+
+
+def lean_copy(full: RVEBatch, rows: np.ndarray) -> RVEBatch:
+    """The rows `rows` of `full` as a lean host batch: its per-RVE arrays copied, the
+    per-sphere ones placeholders (module docstring)."""
+    rows = np.asarray(rows, np.int64)
+    out = {}
+    for name in RVEBatch.__dataclass_fields__:
+        a = getattr(full, name)
+        if name in SPHERE_AXIS_FIELDS:
+            out[name] = _placeholder((len(rows), *a.shape[1:]), a.dtype)
+        else:
+            out[name] = a[rows].copy()
+    return RVEBatch(**out)
 
 
 @cuda.jit
@@ -82,12 +159,51 @@ def _row_means(a, out):
 class DeviceBatch:
     """The state of `host` (an RVEBatch) on the current GPU, kept there between calls."""
 
-    def __init__(self, host: RVEBatch):
+    def __init__(self, host: RVEBatch, arrays: dict | None = None,
+                 constants: dict | None = None):
+        """Upload `host` (a full batch), or adopt device `arrays` (STATE_ARGS names) of
+        which `host` is the lean mirror, with its per-RVE `constants` (from_library)."""
         self.host = host
         self.moved = 0  # bytes copied between host and device, both ways
         self.arrays: dict[str, object] = {}
         self._zeros: dict[tuple, object] = {}  # device zeros standing for unsent controls
-        self.push()
+        self.lean = arrays is not None
+        if self.lean:
+            self.arrays = dict(arrays)
+            self.constants = constants
+        else:
+            self.push()
+            self.constants = rve_constants(host)
+
+    @classmethod
+    def from_library(cls, library: list[RVEBatch], assignment,
+                     capacity: int | None = None) -> DeviceBatch:
+        """A batch of len(assignment) RVEs, RVE r a copy of the packing
+        library[assignment[r]], built on the device: the packings go down once and are
+        copied there, and the host keeps a lean mirror (module docstring). `capacity`:
+        neighbour slots per sphere (default the packings' largest); it may be below
+        theirs where every row fits (state.with_capacity)."""
+        assignment = np.ascontiguousarray(assignment, np.int64)
+        k = capacity if capacity is not None else max(b.capacity for b in library)
+        stack = concatenate([with_capacity(b.copy(), k) for b in library])
+        r = len(assignment)
+        host = lean_copy(stack, assignment)
+        d_from = cuda.to_device(assignment)
+        d_to = cuda.to_device(np.arange(r, dtype=np.int64))
+        arrays = {}
+        for name in STATE_ARGS:
+            src = getattr(stack, name)
+            if name not in SPHERE_AXIS_FIELDS:
+                arrays[name] = cuda.to_device(getattr(host, name))
+                continue
+            arrays[name] = cuda.device_array((r, *src.shape[1:]), src.dtype)
+            if r:
+                _copy_rows[r, _COPY](_rows2d(cuda.to_device(src)), d_from,
+                                     _rows2d(arrays[name]), d_to)
+        dev = cls(host, arrays, {key: v[assignment] for key, v in rve_constants(stack).items()})
+        dev.moved = sum(getattr(stack, n).nbytes for n in STATE_ARGS) + sum(
+            getattr(host, n).nbytes for n in STATE_ARGS if n not in SPHERE_AXIS_FIELDS)
+        return dev
 
     @property
     def n_rve(self) -> int:
@@ -105,7 +221,11 @@ class DeviceBatch:
     # -------------------------------------------------------------- host <-> device
     def push(self, rows=None) -> None:
         """Copy the host state to the device: all of it (allocating the device arrays
-        anew, so a capacity regrown on the host is taken), or the RVEs `rows`."""
+        anew, so a capacity regrown on the host is taken), or the RVEs `rows`. A lean
+        batch has no host state to push: `put`."""
+        if self.lean:
+            raise ValueError("a batch built on the device has no host state to push; "
+                             "write rows with put")
         if rows is None:
             for name in STATE_ARGS:
                 a = getattr(self.host, name)
@@ -122,7 +242,11 @@ class DeviceBatch:
 
     def pull(self, rows=None) -> RVEBatch:
         """Copy the device state to the host batch (all RVEs, or `rows`); returns it.
-        The per-sphere masses and radii never change on the device: not copied."""
+        The per-sphere masses and radii never change on the device: not copied. A lean
+        batch's rows are read with `take` (its host has no room for them)."""
+        if self.lean:
+            raise ValueError("a batch built on the device keeps its state there; read "
+                             "rows with take")
         names = [n for n in STATE_ARGS if n not in cuda_kernel.READ_ONLY]
         if rows is None:
             for name in names:
@@ -136,13 +260,131 @@ class DeviceBatch:
                 self.moved += row.nbytes
         return self.host
 
+    def take(self, rows) -> RVEBatch:
+        """A host copy of the RVEs `rows` (full state, gathered on the device, so only
+        they cross; the per-RVE arrays the device does not hold, h0 and the counts, from
+        the host, where they are current)."""
+        rows = np.atleast_1d(np.asarray(rows, np.int64))
+        k = len(rows)
+        out = allocate(k, self.n_particles, self.host.capacity, self.host.ft.shape[3])
+        if k == 0:
+            return out
+        d_rows = cuda.to_device(rows)
+        d_at = cuda.to_device(np.arange(k, dtype=np.int64))
+        for name in STATE_ARGS:
+            src = self.arrays[name]
+            tmp = cuda.device_array((k, *src.shape[1:]), src.dtype)
+            _copy_rows[k, _COPY](_rows2d(src), d_rows, _rows2d(tmp), d_at)
+            tmp.copy_to_host(getattr(out, name))
+            self.moved += tmp.nbytes
+        for name in RVEBatch.__dataclass_fields__:  # per RVE, kept on the host only
+            if name not in STATE_ARGS and name not in SPHERE_AXIS_FIELDS:
+                getattr(out, name)[:] = getattr(self.host, name)[rows]
+        return out
+
+    def put(self, rows, batch: RVEBatch) -> None:
+        """Write `batch` (as many RVEs as `rows`, this batch's sphere count and capacity)
+        into the RVEs `rows`, on the device (scattered there) and in the host mirror."""
+        rows = np.atleast_1d(np.asarray(rows, np.int64))
+        if batch.n_rve != len(rows):
+            raise ValueError(f"put: {batch.n_rve} RVEs for {len(rows)} rows")
+        if len(rows) == 0:
+            return
+        d_rows = cuda.to_device(rows)
+        d_at = cuda.to_device(np.arange(len(rows), dtype=np.int64))
+        for name in STATE_ARGS:
+            a = np.ascontiguousarray(getattr(batch, name))
+            _copy_rows[len(rows), _COPY](_rows2d(cuda.to_device(a)), d_at,
+                                         _rows2d(self.arrays[name]), d_rows)
+            self.moved += a.nbytes
+        for name in RVEBatch.__dataclass_fields__:
+            if not (self.lean and name in SPHERE_AXIS_FIELDS):
+                getattr(self.host, name)[rows] = getattr(batch, name)
+        for key, v in rve_constants(batch).items():
+            self.constants[key][rows] = v
+
+    def remove(self, rows) -> np.ndarray:
+        """Drop the RVEs `rows`, on the device and in the host (state.remove_rves'
+        scheme: the last RVEs that stay move into the holes; the arrays become views of
+        their first rows, so the device memory is kept). Returns `order`, order[i] the
+        former index of RVE i."""
+        gone = np.unique(np.asarray(rows, np.int64))
+        keep = self.n_rve - gone.size
+        holes = gone[gone < keep]
+        movers = np.setdiff1d(np.arange(keep, self.n_rve), gone)
+        order = np.arange(keep)
+        order[holes] = movers
+        if holes.size:
+            d_from = cuda.to_device(movers)
+            d_to = cuda.to_device(holes)
+            for name in STATE_ARGS:
+                a = _rows2d(self.arrays[name])
+                _copy_rows[holes.size, _COPY](a, d_from, a, d_to)
+        self.arrays = {name: a[:keep] for name, a in self.arrays.items()}
+        fields = {}
+        for name in RVEBatch.__dataclass_fields__:
+            a = getattr(self.host, name)
+            if self.lean and name in SPHERE_AXIS_FIELDS:
+                fields[name] = _placeholder((keep, *a.shape[1:]), a.dtype)
+            else:
+                fields[name] = a[order].copy()
+        self.host = RVEBatch(**fields)
+        self.constants = {key: v[order] for key, v in self.constants.items()}
+        self._zeros = {}
+        return order
+
+    def grow(self, capacity: int) -> None:
+        """Widen the neighbour lists to `capacity` slots on the device (lists and
+        history kept; the new slots empty), one array at a time, so that the extra
+        device memory at any moment is one new array; the host mirror follows."""
+        k = self.host.capacity
+        if capacity <= k:
+            return
+        for name, fill in (("nbr_j", 0), ("nbr_shift", 13), ("ft", 0)):
+            old = self.arrays[name]
+            r, n = old.shape[:2]
+            c = old.shape[3] if old.ndim == 4 else 1
+            shape = (r, n, capacity, *old.shape[3:])
+            try:
+                new = cuda.device_array(shape, old.dtype)
+            except cuda.cudadrv.driver.CudaAPIError as err:
+                raise MemoryError(
+                    f"widening the neighbour lists from {k} to {capacity} slots (a row "
+                    f"outgrew them) needs {np.prod(shape) * old.dtype.itemsize / 1e9:.2f} "
+                    f"GB more on the GPU for {name!r}, which it does not have ({err}); "
+                    "run fewer RVEs per GPU") from None
+            if r * n:
+                _copy_slots[r * n, _COPY](old.reshape(r * n, k, c),
+                                          new.reshape(r * n, capacity, c), fill)
+            self.arrays[name] = new
+            del old
+        if self.lean:
+            self.host = lean_copy(self.host, np.arange(self.n_rve))
+            for name in ("nbr_j", "nbr_shift", "ft"):
+                a = getattr(self.host, name)
+                setattr(self.host, name,
+                        _placeholder((*a.shape[:2], capacity, *a.shape[3:]), a.dtype))
+        else:
+            grow_capacity(self.host, capacity)
+
     def pull_field(self, name: str) -> np.ndarray:
         """Copy one state array (a STATE_ARGS name, e.g. the kernel's step_count) from
-        the device into the host batch; returns the host array."""
-        a = getattr(self.host, name)
-        self.arrays[name].copy_to_host(a)
+        the device to the host; returns it: the host batch's array, or, for a per-sphere
+        array of a lean batch, a new one."""
+        d = self.arrays[name]
+        if self.lean and name in SPHERE_AXIS_FIELDS:
+            a = d.copy_to_host()
+        else:
+            a = getattr(self.host, name)
+            d.copy_to_host(a)
         self.moved += a.nbytes
         return a
+
+    def copy_field(self, src: str, dst: str) -> None:
+        """State array dst <- src on the device and in the host mirror (per-RVE arrays
+        of one shape, e.g. the servo's sampled stress from the stress)."""
+        self.arrays[dst].copy_to_device(self.arrays[src])
+        getattr(self.host, dst)[:] = getattr(self.host, src)
 
     # ------------------------------------------------------------------ one pass
     def _control(self, ctl, name: str):
@@ -197,3 +439,4 @@ class DeviceBatch:
         host = d.copy_to_host()
         self.moved += host.nbytes
         return host
+

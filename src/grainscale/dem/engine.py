@@ -332,10 +332,12 @@ def _check(batch, status: np.ndarray, out: np.ndarray) -> None:
             f"RVE {r}: motion became non-finite (time step too large for the stiffness?)")
     if np.any(status == Status.OVERFLOW):
         need = int(out[status == Status.OVERFLOW, 3].max())
-        host = batch.pull() if resident else batch
-        grow_capacity(host, max(need + 4, int(1.5 * host.capacity)))
-        if resident:
-            batch.push()
+        capacity = max(need + 4, int(1.5 * batch.host.capacity if resident
+                                     else batch.capacity))
+        if resident:  # widened on the device (a batch built there has no host copy)
+            batch.grow(capacity)
+        else:
+            grow_capacity(batch, capacity)
     if np.any(status == Status.TOO_THIN):
         r = int(np.argmax(status == Status.TOO_THIN))
         raise RVEError(r,
@@ -344,10 +346,14 @@ def _check(batch, status: np.ndarray, out: np.ndarray) -> None:
             f"deformation; use more particles")
 
 
-def refresh(batch: RVEBatch, params: ContactParams) -> RVEBatch:
+def refresh(batch, params: ContactParams):
     """Evaluate forces, stress, moduli and contacts of the current configuration (no
     motion, the tangential history left as it is): the end-of-increment evaluation of
-    `advance` alone, so refreshing a state that `advance` left changes nothing."""
+    `advance` alone, so refreshing a state that `advance` left changes nothing.
+    `batch`: an RVEBatch, or a DeviceBatch (evaluated on the GPU)."""
     advance(batch, -1, 0.0, params, rate_control(batch.n_rve))
-    batch.stress_servo[:] = batch.stress
+    if isinstance(batch, RVEBatch):
+        batch.stress_servo[:] = batch.stress
+    else:
+        batch.copy_field("stress", "stress_servo")
     return batch

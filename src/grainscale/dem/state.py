@@ -247,6 +247,35 @@ def state_arrays(b: RVEBatch) -> dict[str, np.ndarray]:
 SPHERE_FIELDS = ("s", "v", "w", "rot", "radius", "mass", "inertia", "nbr_j", "nbr_shift",
                  "nbr_count", "ft", "s_ref")
 SLOT_FIELDS = ("nbr_j", "nbr_shift", "ft")
+# every RVEBatch array with a per-sphere axis, scratch included (the rest are per RVE)
+SPHERE_AXIS_FIELDS = SPHERE_FIELDS + ("force", "torque", "x", "link", "wrapv")
+
+
+def longest_row(batches: list[RVEBatch]) -> int:
+    """The most neighbour entries any sphere of `batches` holds (0 for none)."""
+    return max((int(b.nbr_count.max(initial=0)) for b in batches), default=0)
+
+
+def rve_constants(b: RVEBatch) -> dict[str, np.ndarray]:
+    """Per-RVE constants of a batch, (R,) each: mean grain radius [m], grain mass [kg]
+    and solid volume [m^3] (what per-RVE quantities need from the spheres)."""
+    return {"mean_radius": b.radius.mean(axis=1), "grain_mass": b.mass.sum(axis=1),
+            "solid_volume": (4.0 / 3.0) * np.pi * np.sum(b.radius**3, axis=1)}
+
+
+def with_capacity(b: RVEBatch, capacity: int) -> RVEBatch:
+    """`b` with exactly `capacity` neighbour slots per sphere, in place: grown
+    (grow_capacity), or cut where every row fits (the slots past a row's count are never
+    read); ValueError if a row holds more entries than `capacity`."""
+    if capacity >= b.capacity:
+        return grow_capacity(b, capacity)
+    longest = longest_row([b])
+    if longest > capacity:
+        raise ValueError(f"list capacity {capacity}: a row holds {longest} entries")
+    b.nbr_j = np.ascontiguousarray(b.nbr_j[:, :, :capacity])
+    b.nbr_shift = np.ascontiguousarray(b.nbr_shift[:, :, :capacity])
+    b.ft = np.ascontiguousarray(b.ft[:, :, :capacity])
+    return b
 
 
 def padded(arrays: dict[str, np.ndarray], n: int, k: int) -> dict[str, np.ndarray]:
