@@ -26,10 +26,27 @@ Sections, each timed and guarded (an error is recorded, the next section runs):
    states; the report as text in OUT/ncu.txt.
 6. `column`: examples/column_collapse/quick.toml for --steps MPM steps with --device cuda
    and on all CPU cores: wall time and DEM seconds per MPM step of each (cost.json).
+7. `intrusion` (with --intrusion CASE...): each case (e.g. examples/intrusion/seed.toml,
+   seed_quick.toml) run for --intrusion-steps MPM steps of its geostatic stage and, from
+   time 0 with the geostatic stage left out (the intruder on the surface, the bed
+   unsettled), of its intrusion, on each of --intrusion-devices; its library packings
+   from INPUTS/<case name>/packings (--prepare-case). Per MPM step: wall, DEM and other
+   seconds, DEM steps per RVE, bytes moved; the GPU's memory in use and the host's peak
+   resident memory; the batch's list capacity and bytes per sphere; and the projected
+   wall time of the whole run: its MPM steps ((end - start) / the last step's dt) times
+   the median step after the first (which compiles) of each stage, each stage by its
+   own share of the time. The DEM steps per RVE of a developed intrusion are higher
+   than at its start (docs/validation.md §3: 4.8 at d/R 2 on 150-sphere RVEs), so the
+   intrusion's projection is a lower bound; the JSON says so.
 
 On a machine without network (the lent GPU machines), the Python packages missing there
 travel as wheels, with numpy 2.4: numba-cuda 0.30.4's compiler calls `np.row_stack`,
 which numpy 2.5 removed. Figures of 2026-11-26 on an H100: docs/performance.md.
+
+    python benchmarks/gpu_check.py --prepare-case examples/intrusion/seed.toml \
+        --inputs gpu_inputs                                  # the case's library, on the CPU
+    python benchmarks/gpu_check.py --inputs gpu_inputs --out OUT --skip tests throughput \
+        column --intrusion examples/intrusion/seed.toml --intrusion-devices cuda
 
 The packings (--prepare) are the unit element's recipe at 100 kPa (porosity 0.373),
 sheared to 2 % axial strain so that contacts slide and lists churn, as in
@@ -347,6 +364,161 @@ def _column_run(inputs: Path, steps: int, device: str, timeout: float) -> dict:
     return r
 
 
+def prepare_case(case_path: Path, inputs: Path) -> None:
+    """Generate (or copy from the packing store) the library of every "dem" material of
+    a case into inputs/<case name>/packings, where `intrusion` finds them."""
+    import grainscale as gs
+    from grainscale.coupling.materials import packing_library
+
+    case = gs.load_case(case_path)
+    for name, cfg in case.materials.items():
+        if cfg.type == "dem":
+            t0 = time.perf_counter()
+            lib = packing_library(case, name, case_path.parent, inputs / case_path.stem)
+            print(f"{case_path.stem}: {len(lib)} packing(s) of material {name!r}, "
+                  f"{time.perf_counter() - t0:.0f} s, longest rows "
+                  f"{[int(b.nbr_count.max()) for b in lib]}", flush=True)
+
+
+class StepRecorder:
+    """on_step callback of grainscale.run: per MPM step its wall time, the DEM's share,
+    the DEM steps per RVE (over all RVEs, those deferred by adaptive updates included),
+    the share of RVEs stepped and the bytes moved to and from the GPU. The first row's wall
+    time also holds what came before the first step (packings read, state built and
+    uploaded, kernels compiled)."""
+
+    def __init__(self, device: str):
+        self.device = device
+        self.rows: list[dict] = []
+        self.last = time.perf_counter()
+        self.dem = self.rve_steps = self.moved = self.updates = 0.0
+        self.mats: list = []
+
+    def __call__(self, s) -> None:
+        now = time.perf_counter()
+        mats = [m for m in s.materials if hasattr(m, "rve_steps")]
+        dem = sum(m.seconds for m in mats)
+        steps = sum(m.rve_steps for m in mats)
+        moved = sum(m.bytes_moved() for m in mats)
+        updates = sum(m.rve_updates for m in mats)
+        rves = max(sum(m.n_rve for m in mats), 1)
+        self.rows.append({"step": int(s.step), "time": float(s.time),
+                          "dt": float(s.last_dt), "wall_s": round(now - self.last, 4),
+                          "dem_s": round(dem - self.dem, 4),
+                          "dem_steps_per_rve": round((steps - self.rve_steps) / rves, 3),
+                          "fraction_stepped": round((updates - self.updates) / rves, 4),
+                          "bytes_moved_per_rve": round((moved - self.moved) / rves, 1)})
+        self.last, self.dem, self.rve_steps, self.moved = now, dem, steps, moved
+        self.updates = updates
+        self.mats = mats
+
+
+def _memory(device: str) -> dict:
+    import resource
+
+    out = {"host_peak_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+                                 * 1024 / 1e9, 2)}
+    if device == "cuda":
+        from numba import cuda
+
+        free, total = cuda.current_context().get_memory_info()
+        out["gpu_used_gb"] = round((total - free) / 1e9, 2)
+        out["gpu_total_gb"] = round(total / 1e9, 2)
+    return out
+
+
+def intrusion_stage(case_path: Path, inputs: Path, out: Path, steps: int, device: str,
+                    start: float | None = None, threads: int | None = None) -> dict:
+    """One stage of `intrusion` (module docstring, 7.): the case from its own start
+    (the geostatic stage) or from `start` [s], `steps` MPM steps on `device`, without
+    checkpoints or frames, in-process so that the run's state can be read."""
+    import grainscale as gs
+
+    case = gs.load_case(case_path)
+    t_start, t_end = case.time.start, case.time.end
+    if start is not None:
+        case.time.start = start
+    case.output.checkpoint_every = 0
+    case.output.frame_interval = 1e9
+    packings = inputs / case_path.stem / "packings"
+    if packings.is_dir():
+        shutil.copytree(packings, out / "packings", dirs_exist_ok=True)
+    rec = StepRecorder(device)
+    t0 = time.perf_counter()
+    gs.run(case, out, max_steps=steps, device=device, threads=threads, progress=False,
+           on_step=rec)
+    wall = time.perf_counter() - t0
+    mats = rec.mats
+    res = {"case": case_path.name, "device": device, "start": case.time.start,
+           "steps": len(rec.rows), "wall_s": round(wall, 2), "rows": rec.rows,
+           "rves": int(sum(m.n_rve for m in mats)),
+           "particles": [int(b.n_particles) for m in mats for b in m.groups],
+           "capacity": [int(b.capacity) for m in mats for b in m.groups],
+           **_memory(device)}
+    if device == "cuda" and mats:
+        spheres = sum(b.n_rve * b.n_particles for m in mats for b in m.groups)
+        res["device_bytes_per_sphere"] = round(sum(m.device_bytes() for m in mats)
+                                               / max(spheres, 1), 1)
+    steady = rec.rows[1:] or rec.rows
+    if steady:
+        res["median_step_s"] = float(np.median([r["wall_s"] for r in steady]))
+        res["median_dem_s"] = float(np.median([r["dem_s"] for r in steady]))
+        res["median_dem_steps_per_rve"] = float(np.median([r["dem_steps_per_rve"]
+                                                           for r in steady]))
+        dt = rec.rows[-1]["dt"]
+        res["run_steps_estimate"] = int(np.ceil((t_end - t_start) / dt)) if dt > 0 else None
+    return res
+
+
+def intrusion(cases: list[Path], inputs: Path, out: Path, steps: int,
+              devices: tuple[str, ...], threads: int | None = None) -> dict:
+    """Section 7 (module docstring): each case's geostatic and intrusion stages on each
+    device, and the projected wall time of its whole run."""
+    import grainscale as gs
+
+    res = {}
+    for case_path in cases:
+        if not (inputs / case_path.stem / "packings").is_dir():  # generated once for all
+            prepare_case(case_path, inputs)
+        case = gs.load_case(case_path)
+        t_start, t_end = case.time.start, case.time.end
+        for device in devices:
+            key = f"{case_path.stem}_{device}"
+            stages = {}
+            for stage, start in (("geostatic", None), ("intrusion", 0.0)):
+                if stage == "geostatic" and t_start >= 0.0:
+                    continue
+                try:
+                    stages[stage] = intrusion_stage(case_path, inputs,
+                                                    out / f"{key}_{stage}", steps, device,
+                                                    start, threads)
+                except Exception as err:  # recorded; the next stage still runs
+                    stages[stage] = {"error": f"{type(err).__name__}: {err}"}
+            res[key] = {"stages": stages, **projection(stages, t_start, t_end)}
+    return res
+
+
+def projection(stages: dict, t_start: float, t_end: float) -> dict:
+    """The whole run's wall time [h] from the stages' median step and step size: each
+    stage's simulated time (geostatic: start to 0; intrusion: 0 to end) over its last
+    dt, times its median wall time a step."""
+    hours, how = 0.0, []
+    spans = {"geostatic": (t_start, min(0.0, t_end)), "intrusion": (max(0.0, t_start), t_end)}
+    for stage, (a, b) in spans.items():
+        st = stages.get(stage)
+        if b <= a:
+            continue
+        if not st or "median_step_s" not in st or not st["rows"][-1]["dt"] > 0:
+            return {"projected_h": None, "projection": f"no {stage} steps measured"}
+        n = (b - a) / st["rows"][-1]["dt"]
+        hours += n * st["median_step_s"] / 3600
+        how.append(f"{stage}: {n:.0f} steps x {st['median_step_s']:.3g} s")
+    return {"projected_h": round(hours, 2),
+            "projection": "; ".join(how) + " (the median step after the first of each "
+                          "stage; the intrusion's from its start: its DEM steps per RVE "
+                          "grow with depth, so a lower bound)"}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--prepare", type=Path, help="generate the packings into this folder")
@@ -365,9 +537,20 @@ def main() -> None:
     ap.add_argument("--profile", help="SPHERESxRVESxTHREADS to profile with ncu")
     ap.add_argument("--no-per-call", action="store_true",
                     help="leave out the per-call path's ratio at 10,000 RVEs")
+    ap.add_argument("--prepare-case", type=Path,
+                    help="generate this case's library packings into --inputs")
+    ap.add_argument("--intrusion", type=Path, nargs="*", default=[],
+                    help="cases of the intrusion section (7.)")
+    ap.add_argument("--intrusion-steps", type=int, default=4,
+                    help="MPM steps of each stage of the intrusion section")
+    ap.add_argument("--intrusion-devices", nargs="+", default=["cuda"],
+                    help="devices of the intrusion section")
     args = ap.parse_args()
     if args.prepare:
         prepare(args.prepare)
+        return
+    if args.prepare_case:
+        prepare_case(args.prepare_case, args.inputs)
         return
     start = time.perf_counter()
     rep = Report(args.out)
@@ -391,6 +574,9 @@ def main() -> None:
         left = args.budget - (time.perf_counter() - start)
         rep.section("column", column, args.inputs, args.steps, max(left, 30.0),
                     tuple(args.devices))
+    if args.intrusion:
+        rep.section("intrusion", intrusion, args.intrusion, args.inputs, args.out,
+                    args.intrusion_steps, tuple(args.intrusion_devices))
     rep.data["total_s"] = round(time.perf_counter() - start, 1)
     rep.save()
 

@@ -69,7 +69,11 @@ def _sym(sigma: np.ndarray) -> np.ndarray:
 _DEM = DEMMaterialCfg(type="dem")  # the case file's defaults are the only ones
 
 
-SLOT_MARGIN = 1  # list slots a device-built batch gets beyond the library's longest row
+# list slots a device-built batch gets beyond the library's longest row: under large
+# deformation rows grow (the no-slip intrusion to d/R 2, 150-sphere RVEs: from 11-12 in
+# the packings to 15 in 3 of 3,851 RVEs, 14 in 33; docs/performance.md), and a row that
+# outgrows the lists regrows the whole batch, which a full GPU cannot hold twice
+SLOT_MARGIN = 3
 CHUNK_BYTES = 256 * 2**20  # a checkpoint gathers a device-built batch this much at a time
 
 
