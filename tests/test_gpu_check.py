@@ -81,8 +81,10 @@ def test_intrusion_section_on_the_cuda_simulator(tmp_path):
     per RVE and step reported. Minutes: the simulator runs each GPU thread in Python."""
     case = tiny_case(tmp_path)
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", NUMBA_NUM_THREADS="1")
+    # blocks of 8 threads (the simulator runs each as a Python thread)
     code = ("import json, sys; sys.path.insert(0, 'benchmarks'); import gpu_check; "
-            "from pathlib import Path; "
+            "from pathlib import Path; from grainscale.dem import cuda_kernel, device_batch; "
+            "cuda_kernel.THREADS = device_batch._COPY = 8; "
             f"r = gpu_check.intrusion([Path({str(case)!r})], Path({str(tmp_path)!r}) / "
             f"'inputs', Path({str(tmp_path)!r}) / 'out', {STEPS}, ('cuda',), 1); "
             "print(json.dumps(r))")
