@@ -422,8 +422,10 @@ def _memory(device: str) -> dict:
         from numba import cuda
 
         free, total = cuda.current_context().get_memory_info()
-        out["gpu_used_gb"] = round((total - free) / 1e9, 2)
-        out["gpu_total_gb"] = round(total / 1e9, 2)
+        used = (total - free) / 1e9
+        # numba's simulator has no device memory to report: None there
+        out["gpu_used_gb"] = round(used, 2) if np.isfinite(used) else None
+        out["gpu_total_gb"] = round(total / 1e9, 2) if np.isfinite(total) else None
     return out
 
 
