@@ -31,13 +31,14 @@ Sections, each timed and guarded (an error is recorded, the next section runs):
    time 0 with the geostatic stage left out (the intruder on the surface, the bed
    unsettled), of its intrusion, on each of --intrusion-devices; its library packings
    from INPUTS/<case name>/packings (--prepare-case). Per MPM step: wall, DEM and other
-   seconds, DEM steps per RVE, bytes moved; the GPU's memory in use and the host's peak
-   resident memory; the batch's list capacity and bytes per sphere; and the projected
-   wall time of the whole run: its MPM steps ((end - start) / the last step's dt) times
-   the median step after the first (which compiles) of each stage, each stage by its
-   own share of the time. The DEM steps per RVE of a developed intrusion are higher
-   than at its start (docs/validation.md §3: 4.8 at d/R 2 on 150-sphere RVEs), so the
-   intrusion's projection is a lower bound; the JSON says so.
+   seconds, DEM steps per RVE, bytes moved; the GPU's memory in use and the process's
+   peak resident memory so far (earlier sections and stages included); the batch's list
+   capacity and bytes per sphere; and the projected wall time of the whole run: each
+   stage's span of simulated time over its last step's dt, times its median step after
+   the first (which compiles). The intrusion's steps are measured at its start, in a bed
+   that has not settled: a developed intrusion's DEM work per RVE differs (4.8 DEM
+   steps per RVE and MPM step at d/R 2 on 150-sphere RVEs, docs/validation.md §3.4), so
+   its projection is an estimate of unknown sign; the JSON says so.
 
 On a machine without network (the lent GPU machines), the Python packages missing there
 travel as wheels, with numpy 2.4: numba-cuda 0.30.4's compiler calls `np.row_stack`,
@@ -437,7 +438,6 @@ def intrusion_stage(case_path: Path, inputs: Path, out: Path, steps: int, device
     import grainscale as gs
 
     case = gs.load_case(case_path)
-    t_start, t_end = case.time.start, case.time.end
     if start is not None:
         case.time.start = start
     case.output.checkpoint_every = 0
@@ -467,8 +467,6 @@ def intrusion_stage(case_path: Path, inputs: Path, out: Path, steps: int, device
         res["median_dem_s"] = float(np.median([r["dem_s"] for r in steady]))
         res["median_dem_steps_per_rve"] = float(np.median([r["dem_steps_per_rve"]
                                                            for r in steady]))
-        dt = rec.rows[-1]["dt"]
-        res["run_steps_estimate"] = int(np.ceil((t_end - t_start) / dt)) if dt > 0 else None
     return res
 
 
@@ -517,8 +515,9 @@ def projection(stages: dict, t_start: float, t_end: float) -> dict:
         how.append(f"{stage}: {n:.0f} steps x {st['median_step_s']:.3g} s")
     return {"projected_h": round(hours, 2),
             "projection": "; ".join(how) + " (the median step after the first of each "
-                          "stage; the intrusion's from its start: its DEM steps per RVE "
-                          "grow with depth, so a lower bound)"}
+                          "stage; the intrusion's from its first steps in an unsettled "
+                          "bed, not a developed intrusion's: an estimate of unknown "
+                          "sign)"}
 
 
 def main() -> None:
@@ -548,6 +547,9 @@ def main() -> None:
     ap.add_argument("--intrusion-devices", nargs="+", default=["cuda"],
                     help="devices of the intrusion section")
     args = ap.parse_args()
+    if args.intrusion_steps < 2:
+        ap.error(f"--intrusion-steps {args.intrusion_steps}: must be at least 2 (the first "
+                 "step compiles the kernels and is left out of the median)")
     if args.prepare:
         prepare(args.prepare)
         return

@@ -399,6 +399,26 @@ def device_built(base: RVEBatch, p: engine.ContactParams, dt: float) -> dict:
     res["grown"] = _same(built.take(np.arange(built.n_rve)), up.pull())
     res["grown_capacity"] = [built.host.capacity, int(built.arrays["ft"].shape[2])]
     res["stepped_again"] = step(np.array([1, 2, 1]))
+    # a list overflow inside engine.advance: packings cut to 3 slots, lists to rebuild
+    small = []
+    for b in lib:
+        b = with_capacity(b.copy(), longest_row([b]))
+        b.nbr_j = np.ascontiguousarray(b.nbr_j[:, :, :3])
+        b.nbr_shift = np.ascontiguousarray(b.nbr_shift[:, :, :3])
+        b.ft = np.ascontiguousarray(b.ft[:, :, :3])
+        b.nbr_count = np.minimum(b.nbr_count, 3).astype(np.int32)
+        b.need_rebuild[:] = 1
+        small.append(b)
+    built = DeviceBatch.from_library(small, asg, 3)
+    up = DeviceBatch(concatenate([small[i] for i in asg]))
+    mirror = built.host
+    still = engine.rate_control(len(asg))
+    engine.advance(built, 2, dt, p, still)
+    engine.advance(up, 2, dt, p, still)
+    res["overflow"] = {"same": _same(built.take(np.arange(len(asg))), up.pull()),
+                       "capacity": [3, built.host.capacity, up.host.capacity],
+                       "same_host_object": built.host is mirror,
+                       "counts": bool(np.array_equal(built.host.ncontact, up.host.ncontact))}
     return res
 
 

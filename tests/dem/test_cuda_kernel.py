@@ -280,7 +280,13 @@ def test_a_batch_built_on_the_device_equals_the_uploaded_one_bitwise(sim):
     start, capacity, built = res["capacity"]
     assert capacity == built < start  # the longest row plus one slot, not the 16
     assert res["grown_capacity"] == [capacity + 5] * 2
-    # per RVE: 7 (3,3) float64 arrays (504 B) and 4 counters of 8 B (step_count,
+    # an overflow inside engine.advance widens a lean batch's lists on the device, in
+    # its own host object (which a material's groups hold), as the uploaded batch's
+    over = res["overflow"]
+    assert all(over["same"].values()), over["same"]
+    assert over["capacity"][1] == over["capacity"][2] > 3
+    assert over["same_host_object"] and over["counts"]
+    # per RVE: 7 (3,3) float64 arrays (504 B) and 5 counters of 8 B (step_count,
     # unbalanced, kinetic) or 4 B (need_rebuild, ncontact): 536 B
     assert res["host_bytes_per_rve"] == 536
     assert res["state_bytes_per_rve"] > 15 * res["host_bytes_per_rve"]

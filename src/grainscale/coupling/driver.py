@@ -281,20 +281,22 @@ def check_checkpoint_memory(s: MPMState, every: int, comm: Comm,
                             available: int | None = None) -> None:
     """Refuse, before the first step, a run whose checkpoints cannot be written: a
     checkpoint gathers each rank's RVE state on its host (for RVEs on a GPU, all of it,
-    in chunks), so it must fit CHECKPOINT_SHARE of the memory available (`available`,
+    in chunks), and the ranks of a node write theirs at once, so a node's ranks (taken
+    to hold alike) must fit CHECKPOINT_SHARE of the memory available (`available`,
     default host_memory()). ConfigError on every rank alike, with the sizes."""
     if not every:
         return
     need = sum(m.checkpoint_bytes() for m in s.materials if hasattr(m, "checkpoint_bytes"))
+    node = need * comm.node_ranks()
     available = host_memory() if available is None else available
-    worst = float(comm.max(np.array([need / max(available, 1)]))[0])
+    worst = float(comm.max(np.array([node / max(available, 1)]))[0])
     if worst > CHECKPOINT_SHARE:
         raise ConfigError(
             f"output.checkpoint_every = {every} (--checkpoint-every): a checkpoint gathers "
-            f"the RVEs' state on the host, {_size(need)} on this rank, and this machine has "
-            f"{_size(available)} available ({worst:.0%} of it on the fullest rank; "
-            f"at most {CHECKPOINT_SHARE:.0%} allowed); valid: 0 (no checkpoints), or more "
-            "ranks (MPI) so that each holds fewer RVEs")
+            f"the RVEs' state on the host, {_size(need)} on this rank and "
+            f"{_size(node)} on its node, which has {_size(available)} available "
+            f"({worst:.0%} of it on the fullest node; at most {CHECKPOINT_SHARE:.0%} "
+            "allowed); valid: 0 (no checkpoints), or the run spread over more nodes (MPI)")
 
 
 def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_steps,
@@ -308,7 +310,8 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     for mat, ids in zip(s.materials, s.mat_points, strict=True):
         if hasattr(mat, "initial_stress") and getattr(mat, "n_rve", 0):
             s.points.stress[slice(None) if ids is None else ids] = mat.initial_stress()
-    check_checkpoint_memory(s, every, comm)
+    if found is None:  # before anything is written (a resume: once restored, below)
+        check_checkpoint_memory(s, every, comm)
     if root:
         (out / "frames").mkdir(exist_ok=True)
         (out / "case.resolved.toml").write_text(resolved_toml(case))
@@ -322,6 +325,7 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     resume = found is not None
     if resume:
         c = checkpoints.restore(found, s)
+        check_checkpoint_memory(s, every, comm)  # the restored RVEs, before any write
         # output slots (a step can span several intervals) and what was actually written
         n_rows, n_frames = int(c["rows"]), int(c["frames"])
         last_row_step = int(c.get("last_row_step", -1))

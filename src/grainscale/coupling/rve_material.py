@@ -21,9 +21,12 @@ With device "cuda" the RVEs' state stays on the GPU for the whole run
 stiffness, cell and counts up; the rest of the state comes to the host only where it is
 read (`state` for checkpoints, `rve` for probes, cell reduction and retiling of the RVEs
 concerned). The batch is built there (DeviceBatch.from_library: the library's packings
-copied on the device by the assignment), so the host never holds the RVEs' per-sphere
+copied on the device by the assignment), so the host does not hold the RVEs' per-sphere
 state, only a lean mirror of their per-RVE arrays; rows are read and written on the
-device (`take`, `put`, `remove`), and a checkpoint gathers the state in chunks.
+device (`take`, `put`, `remove`), and a checkpoint gathers the state in chunks. Groups
+made on the host and uploaded keep a full host mirror: the cells doubled by retiling,
+and every group of a run resumed from a checkpoint or rebalanced over ranks (load_state
+rebuilds them from the saved arrays).
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ from grainscale.coupling import predictor
 from grainscale.dem import engine, homogenise, lattice, retile
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import (
+    SLOT_FIELDS,
+    SPHERE_FIELDS,
     STATE_FIELDS,
     RVEBatch,
     concatenate,
@@ -146,6 +151,7 @@ class RVEMaterial:
         engine.check_device(device)
         self.device = device
         self._dev: dict[int, object] = {}  # id(group) -> its DeviceBatch (device "cuda")
+        self._moved_before = 0  # bytes moved by device batches since dropped
         self.name = name
         self.params = params
         self.mode = mode
@@ -244,16 +250,20 @@ class RVEMaterial:
     def _forget_devices(self) -> None:
         """Drop the device copies of groups that are gone (after retiling or loading);
         the current groups are uploaded again by their next update."""
-        self._dev = {id(b): self._dev[id(b)] for b in self.groups
-                     if id(b) in self._dev and self._dev[id(b)].host is b}
+        kept = {id(b): self._dev[id(b)] for b in self.groups
+                if id(b) in self._dev and self._dev[id(b)].host is b}
+        gone = {id(d): d for d in self._dev.values()}.keys() - {id(d) for d in kept.values()}
+        self._moved_before += sum(d.moved for d in self._dev.values() if id(d) in gone)
+        self._dev = kept
 
     def device_bytes(self) -> int:
         """Bytes of RVE state resident on the GPU (0 on the CPU)."""
         return sum(d.device_bytes() for d in self._dev.values())
 
     def bytes_moved(self) -> int:
-        """Bytes copied between host and GPU so far (0 on the CPU)."""
-        return sum(d.moved for d in self._dev.values())
+        """Bytes copied between host and GPU so far (0 on the CPU), by the groups there
+        now and those dropped before."""
+        return self._moved_before + sum(d.moved for d in self._dev.values())
 
     @property
     def batch(self) -> RVEBatch | None:
@@ -522,8 +532,8 @@ class RVEMaterial:
         self._sync()
         if self.groups:
             n = max(b.n_particles for b in self.groups)
-            # the capacity only grows (retiling, overflows): tables cut to the rows'
-            # longest count are several times smaller
+            # capacities hold room for the rows to grow (list_capacity, overflows):
+            # tables cut to the rows' longest count are smaller
             k = max(max(self._longest_row(b) for b in self.groups), 1)
             arrays = {}
             for b, rows in zip(self.groups, self.rows, strict=True):
@@ -569,9 +579,22 @@ class RVEMaterial:
             yield at, dev.take(at)
 
     def checkpoint_bytes(self) -> int:
-        """Bytes of RVE state a checkpoint of this process gathers on the host (at the
-        lists' capacity: an upper bound)."""
-        return sum(b.n_rve * rve_state_bytes(b) for b in self.groups)
+        """Bytes of the RVE state table a checkpoint of this process builds on the host
+        (`state`: every RVE padded to the largest sphere count, at the largest list
+        capacity, which bounds the longest row it is cut to), plus one chunk in flight."""
+        if not self.groups:
+            return 0
+        widest = max(self.groups, key=lambda b: (b.n_particles, b.capacity))
+        n = max(b.n_particles for b in self.groups)
+        k = max(b.capacity for b in self.groups)
+        per_sphere = sum(getattr(widest, f).itemsize * int(np.prod(getattr(widest, f).shape[2:]))
+                         for f in SPHERE_FIELDS if f not in SLOT_FIELDS)
+        per_slot = sum(getattr(widest, f).itemsize * int(np.prod(getattr(widest, f).shape[3:]))
+                       for f in SLOT_FIELDS)
+        per_rve = sum(getattr(widest, f).itemsize * int(np.prod(getattr(widest, f).shape[1:]))
+                      for f in STATE_FIELDS if f not in SPHERE_FIELDS)
+        chunk = CHUNK_BYTES if any(self._lean(b) is not None for b in self.groups) else 0
+        return self.n_points * (per_rve + n * (per_sphere + k * per_slot)) + chunk
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
         arrays = {k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS}

@@ -12,19 +12,21 @@ and the small per-RVE results come up:
 
 so after a call `host.h`, `host.stress`, `host.stiffness`, `host.ncontact`,
 `host.unbalanced` and `host.kinetic` are current and every other host array is stale.
-Whatever needs the rest (a checkpoint, a probe frame, cell reduction, retiling, a
-capacity regrowth) calls `pull` first, explicitly, and `push` after changing the host
-state. `moved` counts the bytes that crossed, both ways.
+Whatever needs the rest reads it explicitly: `pull` (all of it, into the host batch) or
+`take` (some rows, as a new batch), and writes it back with `push` or `put`; a capacity
+overflow widens the lists on the device (`grow`). `moved` counts the bytes that
+crossed, both ways.
 
 A batch built on the device (`from_library`: copies of a few packings placed there by a
 per-point assignment) never has its per-sphere state on the host: its `host` is *lean*,
 holding the per-RVE arrays (cell, stress, moduli, counters: ~540 B an RVE) and, for every
-per-sphere array, a read-only placeholder of the right shape and no memory (NaN, or -1
-for integers), so that a read that forgot the device shows as NaN or an error instead
-of stale numbers. Its rows are read and written through `take` and `put` (gathered and
-scattered on the device, so only the rows asked for cross), `remove` drops rows on the
-device, `grow` widens the neighbour lists there, and the constants that per-RVE
-quantities need (mean radius, grain mass, solid volume) are kept per RVE.
+per-sphere array, a read-only placeholder of the right shape and no memory (NaN; -1, or
+the largest value of an unsigned type, for integers), so that a read that forgot the
+device shows as NaN or an error instead of stale numbers. Its rows are read and written
+through `take` and `put` (gathered and scattered on the device, so only the rows asked
+for cross), `remove` drops rows on the device, `grow` widens the neighbour lists there,
+and the constants that per-RVE quantities need (mean radius, grain mass, solid volume)
+are kept per RVE.
 """
 
 from __future__ import annotations
@@ -358,8 +360,7 @@ class DeviceBatch:
                                           new.reshape(r * n, capacity, c), fill)
             self.arrays[name] = new
             del old
-        if self.lean:
-            self.host = lean_copy(self.host, np.arange(self.n_rve))
+        if self.lean:  # the same host object: its holders (a material's groups) keep it
             for name in ("nbr_j", "nbr_shift", "ft"):
                 a = getattr(self.host, name)
                 setattr(self.host, name,

@@ -229,7 +229,7 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
 
     `batch` may also be a device_batch.DeviceBatch, whose state stays on the GPU (device
     is then "cuda" whatever is passed): only the step counts, controls and per-RVE
-    results cross, and a capacity regrowth pulls, regrows and pushes explicitly.
+    results cross, and a capacity overflow widens the lists on the device.
 
     A host batch whose contact history lacks the rolling moments that `params` needs
     gets zero moments (state.with_history)."""
@@ -322,7 +322,7 @@ def not_finite(batch: RVEBatch) -> np.ndarray:
 
 def _check(batch, status: np.ndarray, out: np.ndarray) -> None:
     """Errors of a kernel pass, and a capacity regrowth on overflow; `batch` an RVEBatch
-    or a DeviceBatch (checked on the device; regrown on the host, then pushed)."""
+    or a DeviceBatch (checked and regrown on the device)."""
     resident = not isinstance(batch, RVEBatch)
     bad = (batch.not_finite() if resident else not_finite(batch)) | (
         status == Status.NOT_FINITE)
@@ -332,8 +332,8 @@ def _check(batch, status: np.ndarray, out: np.ndarray) -> None:
             f"RVE {r}: motion became non-finite (time step too large for the stiffness?)")
     if np.any(status == Status.OVERFLOW):
         need = int(out[status == Status.OVERFLOW, 3].max())
-        capacity = max(need + 4, int(1.5 * batch.host.capacity if resident
-                                     else batch.capacity))
+        capacity = max(need + 4, int(1.5 * (batch.host.capacity if resident
+                                            else batch.capacity)))
         if resident:  # widened on the device (a batch built there has no host copy)
             batch.grow(capacity)
         else:
