@@ -252,8 +252,9 @@ class RVEMaterial:
         the current groups are uploaded again by their next update."""
         kept = {id(b): self._dev[id(b)] for b in self.groups
                 if id(b) in self._dev and self._dev[id(b)].host is b}
-        gone = {id(d): d for d in self._dev.values()}.keys() - {id(d) for d in kept.values()}
-        self._moved_before += sum(d.moved for d in self._dev.values() if id(d) in gone)
+        every = {id(d): d for d in self._dev.values()}  # a batch may sit under two keys
+        kept_ids = {id(d) for d in kept.values()}
+        self._moved_before += sum(d.moved for i, d in every.items() if i not in kept_ids)
         self._dev = kept
 
     def device_bytes(self) -> int:
