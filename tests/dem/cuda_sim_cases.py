@@ -475,11 +475,11 @@ def lean_material(base: RVEBatch, p: engine.ContactParams) -> dict:
 
 
 def main(parts: list[str]) -> None:
-    """parts: "kernel" (sections 1, 2, 7, 9, 10 and 12: shear through rebuilds, capacity
-    overflow, the resident path, scratch kept per shape, more RVEs than blocks, a batch
-    built on the device; tiny batches, the fast tier), "kernel_more" (sections 3-6 and
-    13: momentum, damping and idle threads, reverse-list overflow, spread radii, a
-    material built on the device) and/or
+    """parts: "kernel" (sections 1, 2, 7, 9 and 10: shear through rebuilds, capacity
+    overflow, the resident path, scratch kept per shape, more RVEs than blocks; tiny
+    batches, the fast tier), "kernel_more" (sections 3-6, 12 and 13: momentum, damping
+    and idle threads, reverse-list overflow, spread radii, a batch and a material built
+    on the device; the validation tier) and/or
     "coupled" (section 8, the `grainscale run` cases, minutes on the simulator)."""
     t0 = time.perf_counter()
     res: dict = {"available": cuda_kernel.is_available()}
@@ -552,9 +552,6 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
     res["alternating"] = alternating_shapes(base, p, dt)
     res["alternating"]["seconds"] = time.perf_counter() - t0
 
-    # 12. a batch built on the device from a library, kept there (device_batch.py)
-    res["device_built"] = device_built(base, p, dt)
-
     # 10. a block's scratch reused by the RVEs it runs one after another
     t0 = time.perf_counter()
     res["blocks"] = more_rves_than_blocks(base, p, dt)
@@ -562,8 +559,8 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
 
 
 def more_cases(base, p, dt, ctrl, still, res) -> None:
-    """Sections 3-6 and 13, and section 1's shear run twice on the device: bitwise the
-    same."""
+    """Sections 3-6, 12 and 13, and section 1's shear run twice on the device: bitwise
+    the same."""
     first, again = base.copy(), base.copy()
     engine.advance(first, SHEAR_STEPS, dt, p, ctrl, device="cuda")
     engine.advance(again, SHEAR_STEPS, dt, p, ctrl, device="cuda")
@@ -639,6 +636,9 @@ def more_cases(base, p, dt, ctrl, still, res) -> None:
     common = 2.0 * gpu.radius.max() + pw.skin
     res["wide"]["common"] = len(brute_pairs(gpu.h[0], gpu.s[0] - np.floor(gpu.s[0]),
                                             gpu.radius[0], lambda i, j: np.full(len(i), common)))
+
+    # 12. a batch built on the device from a library, kept there (device_batch.py)
+    res["device_built"] = device_built(base, p, dt)
 
     # 13. an RVEMaterial whose batch is built on the device, against one on the CPU
     res["lean_material"] = lean_material(base, p)

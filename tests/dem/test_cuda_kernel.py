@@ -262,7 +262,8 @@ def test_resident_state_equals_the_per_call_path_bitwise(sim, case):
     assert res["bytes_per_rve_call"] <= 1024
 
 
-def test_a_batch_built_on_the_device_equals_the_uploaded_one_bitwise(sim):
+@pytest.mark.validation  # ~15 s of simulator: the fast tier's budget is spent
+def test_a_batch_built_on_the_device_equals_the_uploaded_one_bitwise(sim_long):
     """DeviceBatch.from_library (two 24-sphere packings copied on the device by an
     assignment of 5 RVEs) against the same batch concatenated on the host and uploaded:
     every state array bitwise equal after the build, after a shear increment, after
@@ -272,7 +273,7 @@ def test_a_batch_built_on_the_device_equals_the_uploaded_one_bitwise(sim):
     moves rows exactly. The host keeps only the per-RVE arrays (~540 B an RVE, against
     ~10 kB of state for these 24 spheres): its per-sphere arrays are read-only NaN
     placeholders, so a read that forgets the device cannot pass for data."""
-    res = sim["device_built"]
+    res = sim_long["device_built"]
     for stage in ("build", "stepped", "per_rve_current", "put", "removed", "grown",
                   "stepped_again"):
         assert all(res[stage].values()), (stage, res[stage])
