@@ -323,14 +323,7 @@ class DeviceBatch:
                 a = _rows2d(self.arrays[name])
                 _copy_rows[holes.size, _COPY](a, d_from, a, d_to)
         self.arrays = {name: a[:keep] for name, a in self.arrays.items()}
-        fields = {}
-        for name in RVEBatch.__dataclass_fields__:
-            a = getattr(self.host, name)
-            if self.lean and name in SPHERE_AXIS_FIELDS:
-                fields[name] = _placeholder((keep, *a.shape[1:]), a.dtype)
-            else:
-                fields[name] = a[order].copy()
-        self.host = RVEBatch(**fields)
+        self.host = lean_copy(self.host, order) if self.lean else self.host.take(order)
         self.constants = {key: v[order] for key, v in self.constants.items()}
         self._zeros = {}
         return order
