@@ -2,7 +2,7 @@
 at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, Fig. 14).
 
     python studies/intrusion/kphi_angles.py run ETA_R --out DIR [--shape cuboid]
-        [--threads N]
+        [--library N] [--threads N]
     python studies/intrusion/kphi_angles.py collect DIR --name NAME (--eta-r ETA_R |
         --twin-phi PHI) [--partial] [--data studies/intrusion/data/noslip]
     python studies/intrusion/kphi_angles.py table [--data studies/intrusion/data/noslip]
@@ -11,6 +11,9 @@ at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, F
 `run`: noslip.toml (or noslip_cuboid.toml) with [rve] rolling_stiffness = 1 and
 rolling_friction = ETA_R (0: no rolling resistance, the plain RVE), run into DIR, resumed
 from its newest checkpoint where DIR holds one (a stopped run goes on where it stopped).
+`--library N` draws the bed from packings 0 .. N-1 of the recipe (the case's 2 by
+default): with 8 they are exactly the packings whose angles PHI_FILES quote, so the bed
+is made of the material whose angle is measured.
 The angle each ETA_R gives is measured on the same [rve] table (noslip.toml's [rve] and
 [triaxial] are quick.toml's) by
     python studies/intrusion/friction_angle.py examples/intrusion/quick.toml \
@@ -82,12 +85,16 @@ def phi_file(eta_r: float) -> Path:
     return ROOT / "studies" / "rolling" / "data" / name
 
 
-def angle_case(eta_r: float, shape: str = "cylinder") -> gs.Case:
+def angle_case(eta_r: float, shape: str = "cylinder", library: int | None = None
+               ) -> gs.Case:
     """noslip.toml (or noslip_cuboid.toml) with rolling resistance eta_r at alpha_r = 1
-    (none at eta_r = 0)."""
+    (none at eta_r = 0), its bed drawn from `library` packings (None: the case's)."""
     if not 0.0 <= eta_r <= 1.0:
         raise SystemExit(f"ETA_R {eta_r}: valid 0 to 1")
     case = gs.load_case(SHAPES[shape])
+    if library is not None:
+        case.materials["sand"].library = library
+        case.title += f", a bed of {library} packings"
     if eta_r > 0.0:
         # both keys at once: each alone is refused (the [rve] table's rule)
         case.rve = type(case.rve).model_validate(
@@ -96,8 +103,9 @@ def angle_case(eta_r: float, shape: str = "cylinder") -> gs.Case:
     return case
 
 
-def run(eta_r: float, shape: str, out: Path, threads: int | None) -> None:
-    case = angle_case(eta_r, shape).check()
+def run(eta_r: float, shape: str, out: Path, threads: int | None,
+        library: int | None = None) -> None:
+    case = angle_case(eta_r, shape, library).check()
     resume = any((out / name).is_file() for name in ("checkpoint.h5", "checkpoint.prev.h5"))
     gs.run(case, out, resume=resume, threads=threads)
 
@@ -270,6 +278,8 @@ def main() -> None:
     r.add_argument("--out", type=Path, required=True)
     r.add_argument("--shape", choices=sorted(SHAPES), default="cylinder")
     r.add_argument("--threads", type=int)
+    r.add_argument("--library", type=int,
+                   help="packings the bed is drawn from (default: the case's 2)")
     c = sub.add_parser("collect")
     c.add_argument("run_dir", type=Path)
     c.add_argument("--name", required=True)
@@ -286,7 +296,7 @@ def main() -> None:
                    help="d/R: the shortest window that counts as a steady slope")
     args = ap.parse_args()
     if args.cmd == "run":
-        run(args.eta_r, args.shape, args.out, args.threads)
+        run(args.eta_r, args.shape, args.out, args.threads, args.library)
     elif args.cmd == "collect":
         if args.eta_r is not None:
             phi_file(args.eta_r)  # refused before anything is copied
