@@ -206,30 +206,129 @@ def test_a_waiting_rve_turns_its_stress_with_the_accumulated_spin(packing):
     np.testing.assert_allclose(s_ada[0], s_ref[0], rtol=0, atol=1e-9 * p)
 
 
-def test_deferred_increments_survive_a_state_round_trip(packing):
-    """state() and load_state carry the composed increments, the deferred counts and
-    times: a material restored mid-deferral goes on bitwise as the original."""
-    a = material(packing, strain_per_substep=5e-5, update_tolerance=5e-5)
+def mean_rotation(m: RVEMaterial) -> np.ndarray:
+    """(P,) each RVE's mean accumulated rolling angle [rad], read from its grains."""
+    return m.batch.rot.mean(axis=1)
+
+
+def staggered(packing, **kw) -> RVEMaterial:
+    """Three points whose RVEs wait out of step: a tolerance (1e-3) that small increments
+    never reach, so an RVE updates only every max_deferred_steps (7) steps or when a large
+    increment (`kick`) makes it due."""
+    return material(packing, strain_per_substep=1e-3, update_tolerance=1e-3,
+                    max_deferred_steps=7, **kw)
+
+
+def kick(step: int) -> np.ndarray:
+    """Increments of 1e-5 per component (spin included), with point p kicked past the
+    tolerance at step p: the points' deferrals then run out of step."""
+    dH = increments(1, size=1e-5, seed=step)[0]
+    if step < 3:
+        dH[step] *= 200.0
+    return dH
+
+
+def test_a_material_restored_mid_deferral_goes_on_bitwise(packing):
+    """state() / load_state carry the composed increments, the deferred counts and times:
+    a material restored with its three points 1, 2 and 3 steps into waiting (none due
+    within the next 4 steps) goes on bitwise as the original through each point's next
+    update (the bound on deferred steps, at 7), in the stress, the increments, counts,
+    times and every point field (rotation_rate is the spin over the time since the
+    update before: a lost t_acc shows there, a lost count in when the RVE updates)."""
+    a = staggered(packing)
     s_a = a.initial_stress()
-    steps = increments(8, size=1e-5)
-    for dH in steps[:4]:
-        a.update(dH, 1e-3, s_a)
-    assert (a.deferred > 0).any() and np.abs(a.H_acc).max() > 0
-    b = material(packing, strain_per_substep=5e-5, update_tolerance=5e-5)
+    dts = [1e-3 * (1.0 + 0.1 * k) for k in range(16)]
+    for k in range(4):
+        a.update(kick(k), dts[k], s_a)
+    assert list(a.deferred) == [3, 2, 1] and (a.t_acc > 0).all()
+    b = staggered(packing)
     b.load_state({k: np.copy(v) for k, v in a.state().items()})
     s_b = s_a.copy()
-    for dH in steps[4:]:
-        a.update(dH, 1e-3, s_a)
-        b.update(dH, 1e-3, s_b)
-        assert np.array_equal(s_a, s_b)
-    assert np.array_equal(a.H_acc, b.H_acc) and np.array_equal(a.deferred, b.deferred)
+    updated = np.zeros(3, bool)
+    for k in range(4, 12):
+        a.update(kick(k), dts[k], s_a)
+        b.update(kick(k), dts[k], s_b)
+        updated |= a.deferred == 0
+        assert np.array_equal(s_a, s_b), k
+        for name in ("H_acc", "deferred", "t_acc", "spin_rate", "theta_prev"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), (k, name)
+        for name, v in a.point_fields().items():
+            assert np.array_equal(v, b.point_fields()[name]), (k, name)
+    assert updated.all()  # every point updated after the restore
 
 
-def test_adaptive_updates_need_quasi_static_rves(packing, tmp_path):
+def test_a_waiting_rves_spin_rate_is_over_the_time_since_its_last_update(packing):
+    """rotation_rate of an RVE that waited k MPM steps of different dt is its change of
+    mean rolling angle over the sum of those dt (the time its grains' rotation took),
+    not over the last step's dt alone."""
+    m = staggered(packing)
+    s = m.initial_stress()
+    theta = mean_rotation(m)
+    since = np.zeros(3)
+    checked = 0
+    for k in range(12):
+        dt = 1e-3 * (1.0 + 0.3 * k)
+        m.update(kick(k), dt, s)
+        since += dt
+        now = mean_rotation(m)
+        for p in np.flatnonzero(m.deferred == 0):
+            want = (now[p] - theta[p]) / since[p]
+            assert m.spin_rate[p] == pytest.approx(want, rel=1e-12), (k, p)
+            checked += since[p] > 1.5 * dt  # it had waited: t_acc and dt differ
+            theta[p], since[p] = now[p], 0.0
+    assert checked >= 3
+
+
+def test_merged_states_are_the_state_of_all_points(packing):
+    """merge_states of a material's state cut into pieces (as ranks write them) gives the
+    whole state back, every key, to the bit: a key it dropped (the owed increments, say)
+    would resume a run without them."""
+    a = staggered(packing)
+    s = a.initial_stress()
+    for k in range(3):
+        a.update(kick(k), 1e-3, s)
+    whole = a.state()
+    parts = [{k: v[lo:hi] if k.startswith("rve_") or v.shape[:1] == (3,) else v
+              for k, v in whole.items()} for lo, hi in ((0, 1), (1, 3))]
+    merged = RVEMaterial.merge_states(parts)
+    assert sorted(merged) == sorted(whole)
+    for k, v in whole.items():
+        assert np.array_equal(merged[k], v), k
+
+
+def test_increments_owed_when_the_tolerance_is_turned_off_are_applied(packing):
+    """A run resumed with update_tolerance 0 from a checkpoint in which RVEs still owe
+    composed increments (--allow-changed materials.NAME.update_tolerance): the next
+    update hands each RVE its owed increment composed with the new one, so its cell ends
+    exactly at prod(I + dH) h0 (1e-13, round-off of the products) as if no step had
+    been deferred; after it nothing is owed and every RVE steps every step."""
+    a = staggered(packing)
+    s = a.initial_stress()
+    h0 = a.batch.h.copy()
+    total = np.tile(np.eye(3), (3, 1, 1))
+    for k in range(3, 6):  # no kick: all three wait
+        dH = kick(k)
+        total = np.einsum("pab,pbc->pac", np.eye(3) + dH, total)
+        a.update(dH, 1e-3, s)
+    assert (a.deferred == 3).all()
+    b = material(packing, strain_per_substep=1e-3)  # update_tolerance 0
+    b.load_state({k: np.copy(v) for k, v in a.state().items()})
+    dH = kick(6)
+    total = np.einsum("pab,pbc->pac", np.eye(3) + dH, total)
+    b.update(dH, 1e-3, s)
+    for r in range(3):
+        np.testing.assert_allclose(b.batch.h[r], total[r] @ h0[r], rtol=0,
+                                   atol=1e-13 * np.abs(h0[r]).max())
+    assert not b.H_acc.any() and not b.t_acc.any() and not b.deferred.any()
+
+
+def test_the_tolerance_is_bounded_for_each_time_integration(packing, tmp_path):
     params, pack = packing
-    with pytest.raises(ValueError, match="update_tolerance = 1e-05 with mode 'dynamic': "
-                                         "adaptive updates need mode 'quasi_static'"):
-        RVEMaterial("sand", params, [pack], n_points=1, update_tolerance=1e-5)
+    with pytest.raises(ValueError, match=r"update_tolerance = 0.001 with mode 'dynamic': "
+                                         r"valid 0 to 0.0001"):
+        RVEMaterial("sand", params, [pack], n_points=1, update_tolerance=1e-3)
+    assert RVEMaterial("sand", params, [pack], n_points=1,
+                       update_tolerance=1e-4).update_tolerance == 1e-4
     from grainscale.config.base import ConfigError
     from grainscale.config.case import load_case
 
@@ -237,10 +336,13 @@ def test_adaptive_updates_need_quasi_static_rves(packing, tmp_path):
     text = open(__file__.replace("tests/coupling/test_adaptive_updates.py",
                                  "examples/unit_element/case.toml")).read()
     case.write_text(text.replace('time_integration = "dynamic"',
-                                 'time_integration = "dynamic"\nupdate_tolerance = 1e-6'))
-    with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 1e-06.*"
-                                          r"valid: 0, or time_integration = 'quasi_static'"):
+                                 'time_integration = "dynamic"\nupdate_tolerance = 2e-4'))
+    with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 0.0002: "
+                                          r"above 0.0001 for dynamic RVEs; valid: 0 to 0.0001"):
         load_case(case)
+    case.write_text(text.replace('time_integration = "dynamic"',
+                                 'time_integration = "dynamic"\nupdate_tolerance = 1e-6'))
+    assert load_case(case).materials["sand"].update_tolerance == 1e-6
     # above one DEM step's strain: refused (it would save nothing and add error)
     case.write_text(text.replace('time_integration = "dynamic"',
                                  'time_integration = "quasi_static"\n'

@@ -157,6 +157,16 @@ def column(folder: Path) -> Path:
     return path
 
 
+def sleeping_column(folder: Path) -> Path:
+    """`column` with sleeping RVEs (tolerance 1e-5, at most 2 steps asleep): an RVE at
+    rest is left unstepped on the device, and wakes with what it owes."""
+    case = tomllib.loads(column(folder).read_text())
+    case["materials"]["sand"].update(update_tolerance=1e-5, max_deferred_steps=2)
+    path = folder / "sleeping_column.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
 def retiled_column(folder: Path) -> Path:
     """`column` with every cell doubled at its first update (retile_width 20 grain
     diameters, at most twice the spheres) and a probe RVE in its first cell: the resident
@@ -207,7 +217,7 @@ def coupled_runs() -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for make in (unit_element, column, adaptive_unit_element):
+        for make in (unit_element, column, adaptive_unit_element, sleeping_column):
             path = make(folder)
             hist = {}
             for device in ("cpu", "cuda"):

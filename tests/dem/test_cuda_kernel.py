@@ -365,21 +365,23 @@ def test_resident_run_retiles_writes_probes_and_resumes_bitwise(sim_long):
 RUN_RTOL = 1e-7
 
 
-@pytest.mark.parametrize("name", ["unit_element", "column", "adaptive_unit_element"])
+@pytest.mark.parametrize("name", ["unit_element", "column", "adaptive_unit_element",
+                                  "sleeping_column"])
 @pytest.mark.validation
 def test_coupled_runs_agree_with_cpu(sim_long, name):
     """The MPM on the CPU with the RVEs on the device, dH and stress exchanged once per
     MPM step: the shrunk unit element (lateral tractions), the same with quasi-static
     RVEs and adaptive updates (the RVE waits some steps: its deferred increment and
-    predicted stress on the device's path), and the column (geostatic stage, release,
-    real-time RVEs) give the CPU's history."""
+    predicted stress on the device's path), the column (geostatic stage, release,
+    real-time RVEs) and the same with sleeping RVEs (some sleep, then wake owing several
+    steps' increments) give the CPU's history."""
     res = sim_long["coupled"][name]
     assert res["rows"] >= 4
-    if name == "adaptive_unit_element":
+    if name in ("adaptive_unit_element", "sleeping_column"):
         assert 0.0 < res["stepped"] < 1.0
     else:
         assert res["stepped"] == 1.0
-    if name != "column":  # the run loaded its point: strain and confinement
+    if "column" not in name:  # the run loaded its point: strain and confinement
         assert res["last"]["axial_strain"] > 2e-5 and res["last"]["p"] > 9e4
     else:  # released and moving
         assert res["last"]["t_over_tc"] > 0 and res["last"]["kinetic_energy"] > 0

@@ -35,9 +35,12 @@ FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is 
 STRAIN_PER_SUBSTEP = 3e-6  # quasi-static RVEs: strain per DEM step, undamped (validation §3.1)
 
 
+SLEEP_TOLERANCE_MAX = 1e-4  # dynamic RVEs: the largest update_tolerance (docs/coupling.md)
+
+
 def default_update_tolerance(time_integration: str, strain_per_substep: float) -> float:
     """A dem material's update_tolerance when none is given: one DEM step's strain for
-    quasi-static RVEs (adaptive updates on), 0 for dynamic ones (the only valid value)."""
+    quasi-static RVEs (adaptive updates on), 0 for dynamic ones (no RVE sleeps)."""
     return strain_per_substep if time_integration == "quasi_static" else 0.0
 
 
@@ -318,11 +321,12 @@ class DEMMaterialCfg(StrictModel):
     # quasi_static only: the RVE's strain per DEM step (docs/validation.md §3.1: the
     # cheapest undamped loading whose triaxial response is the slow limit's)
     strain_per_substep: Annotated[float, Field(gt=0, le=1e-3)] = STRAIN_PER_SUBSTEP
-    # adaptive updates (quasi_static only; at most strain_per_substep): an RVE whose
-    # accumulated increment since its last DEM update (max |H_acc|) is below this is not
-    # stepped, its stress predicted with its affine stiffness and turned with the
-    # accumulated rotation (docs/coupling.md); 0: every RVE every step. Default (None):
-    # strain_per_substep for quasi_static RVEs, 0 for dynamic ones
+    # adaptive updates: an RVE whose accumulated increment since its last DEM update
+    # (max |H_acc|) is below this is not stepped, its stress predicted with its affine
+    # stiffness and turned with the accumulated rotation (docs/coupling.md); quasi_static
+    # RVEs: at most strain_per_substep; dynamic RVEs (sleeping RVEs): at most
+    # SLEEP_TOLERANCE_MAX, and only an RVE whose grains are at rest sleeps. 0: every RVE
+    # every step. Default (None): strain_per_substep for quasi_static RVEs, 0 for dynamic
     update_tolerance: Annotated[float, Field(ge=0)] | None = None
     # ... and is stepped at least every this many MPM steps whatever its increment
     max_deferred_steps: Annotated[int, Field(ge=1, le=10_000)] = 20
@@ -484,6 +488,9 @@ class ColumnCfg(StrictModel):
 HISTORY_ALWAYS = ("time", "dt", "kinetic_energy", "axial_strain", "volumetric_strain", "p",
                   "q", "q_over_p")
 HISTORY_DEM = ("porosity", "coordination", "mean_rotation")
+# the mean over a run's RVEs of the DEM steps and of the updates each has taken since the
+# run began (cumulative: their differences between rows give the cost of that interval)
+HISTORY_COST = ("dem_steps_per_rve", "updates_per_rve")
 HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height",
                   "front_thick", "runout_ratio_thick")
 HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force",
@@ -655,7 +662,8 @@ class Case(StrictModel):
             out.pop("probes", None)
             out["checkpoint_every"] = 0
             if "history" in out:
-                out["history"] = [c for c in out["history"] if c not in HISTORY_DEM]
+                out["history"] = [c for c in out["history"]
+                                  if c not in HISTORY_DEM + HISTORY_COST]
             if title is not None:
                 t["title"] = title
 
@@ -733,12 +741,12 @@ def check_case(case: Case) -> None:
                 "parts, so a larger tolerance saves nothing and adds error: "
                 "docs/coupling.md)")
     for name in dynamic:
-        if case.materials[name].update_tolerance > 0:
+        if case.materials[name].update_tolerance > SLEEP_TOLERANCE_MAX:
             raise ConfigError(
                 f"materials.{name}.update_tolerance = "
-                f"{case.materials[name].update_tolerance}: adaptive updates defer an RVE's "
-                "increment, which a real-time RVE cannot (its clock is the MPM's); valid: 0, "
-                "or time_integration = 'quasi_static'")
+                f"{case.materials[name].update_tolerance}: above {SLEEP_TOLERANCE_MAX:g} for "
+                f"dynamic RVEs; valid: 0 to {SLEEP_TOLERANCE_MAX:g} (a sleeping RVE's stress "
+                "is predicted over the strain it owes; docs/coupling.md)")
     if (dynamic or quasi_static) and case.rve is not None:
         # local damping lends the RVE strength in proportion to its loading rate, in
         # real time and under the quasi-static loading alike (docs/validation.md §3.1)
@@ -772,7 +780,7 @@ def check_case(case: Case) -> None:
     if case.rigid is not None:
         valid += HISTORY_RIGID
     if any(m.type == "dem" for m in case.materials.values()):
-        valid += HISTORY_DEM
+        valid += HISTORY_DEM + HISTORY_COST
     normalised = {"depth_over_R", "force_normalized"} & set(case.output.history)
     if case.rigid is not None and normalised:
         v = case.rigid.velocity

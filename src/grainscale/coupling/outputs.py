@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from grainscale.analysis import deposit_profile, front_at_thickness
-from grainscale.config.case import HISTORY_DEM, Case
+from grainscale.config.case import HISTORY_COST, HISTORY_DEM, Case
 from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.mpm.points import Points
 from grainscale.mpm.setup import AXES
@@ -85,6 +85,9 @@ def history_values(case: Case, s: MPMState, pts: Points,
         for key in HISTORY_DEM:
             if key in fields:
                 out[key] = float((w * fields[key][on_rve]).sum() / w.sum())
+        for key, field in zip(HISTORY_COST, ("rve_dem_steps", "rve_updates"), strict=True):
+            if field in fields:  # per RVE, whatever its volume: the cost
+                out[key] = float(fields[field][on_rve].sum() / on_rve.sum())
     col = case.output.column
     if col is not None:
         fa, ua = AXES[col.flow_axis], AXES[col.up_axis]

@@ -36,7 +36,11 @@ import time
 
 import numpy as np
 
-from grainscale.config.case import DEMMaterialCfg, default_update_tolerance
+from grainscale.config.case import (
+    SLEEP_TOLERANCE_MAX,
+    DEMMaterialCfg,
+    default_update_tolerance,
+)
 from grainscale.config.rve import RVEParams
 from grainscale.coupling import predictor
 from grainscale.dem import engine, homogenise, lattice, retile
@@ -80,6 +84,18 @@ _DEM = DEMMaterialCfg(type="dem")  # the case file's defaults are the only ones
 # outgrows the lists regrows the whole batch, which a full GPU cannot hold twice
 SLOT_MARGIN = 3
 CHUNK_BYTES = 256 * 2**20  # a checkpoint gathers a device-built batch this much at a time
+
+# Sleeping RVEs (dynamic, update_tolerance > 0; docs/coupling.md). An RVE is at rest when
+# its grains are near equilibrium, the unbalanced-force ratio (mean |net force| over the
+# mean contact force) at most QUIET_UNBALANCED, and their fluctuating motion is slow, its
+# inertial number I_v = sqrt(2 E_k rho_s / (M p)) (the inertial number of a shear rate
+# v'/d, v' = sqrt(2 E_k / M) the grains' fluctuation speed) at most QUIET_INERTIAL.
+QUIET_UNBALANCED = 0.05
+QUIET_INERTIAL = 0.01
+# a waking RVE takes what it owes over at least the time that keeps its inertial number
+# max|H_acc| d sqrt(rho_s / p) / T at or below this (the rate-independent regime), at
+# most the time it slept (its macroscopic rate), at least one MPM step's
+WAKE_INERTIAL = 1e-3
 
 
 def list_capacity(library: list[RVEBatch]) -> int:
@@ -130,18 +146,17 @@ class RVEMaterial:
         (0: never), up to retile_max_factor times the packing's spheres. The defaults
         are those of a case file's "dem" material (config.case.DEMMaterialCfg).
         device: where `update` steps the RVEs, "cpu" or "cuda" (solver.device).
-        update_tolerance, max_deferred_steps: adaptive updates (quasi_static only; 0:
-        every RVE every step; None: strain_per_substep for quasi_static, else 0), see
-        `update`."""
+        update_tolerance, max_deferred_steps: adaptive updates (quasi_static RVEs) and
+        sleeping RVEs (dynamic ones); 0: every RVE every step; None: strain_per_substep
+        for quasi_static, else 0; see `update`."""
         if mode not in ("dynamic", "quasi_static"):
             raise ValueError(f"mode = {mode!r}: must be 'dynamic' or 'quasi_static'")
         if update_tolerance is None:  # the case file's default
             update_tolerance = default_update_tolerance(mode, strain_per_substep)
-        if update_tolerance > 0 and mode != "quasi_static":
-            raise ValueError(f"update_tolerance = {update_tolerance} with mode {mode!r}: "
-                             "adaptive updates need mode 'quasi_static'; valid with "
-                             f"{mode!r}: 0")
-        if not 0 <= update_tolerance <= strain_per_substep:
+        if mode == "dynamic" and not 0 <= update_tolerance <= SLEEP_TOLERANCE_MAX:
+            raise ValueError(f"update_tolerance = {update_tolerance} with mode 'dynamic': "
+                             f"valid 0 to {SLEEP_TOLERANCE_MAX:g} (docs/coupling.md)")
+        if mode == "quasi_static" and not 0 <= update_tolerance <= strain_per_substep:
             raise ValueError(f"update_tolerance = {update_tolerance}: valid 0 to "
                              f"strain_per_substep = {strain_per_substep} (docs/coupling.md)")
         if max_deferred_steps < 1:
@@ -198,6 +213,10 @@ class RVEMaterial:
         self.H_acc = np.zeros((n_points, 3, 3))
         self.deferred = np.zeros(n_points, np.int64)
         self.t_acc = np.zeros(n_points)
+        # per point: the DEM updates its RVE took and their DEM steps, since the run
+        # began (where the DEM work goes; history's dem_steps_per_rve)
+        self.updates = np.zeros(n_points, np.int64)
+        self.dem_steps = np.zeros(n_points, np.int64)
         self.rve_updates = 0  # sum over MPM steps of the RVEs stepped
         self.substeps = 0  # DEM steps of the last update (largest over RVEs)
         self.seconds = 0.0  # wall time spent in DEM updates
@@ -314,17 +333,24 @@ class RVEMaterial:
         part. The stress and the batch's `stiffness` are those of the state the increment
         reached (kernel.py item 8; wave_speed).
 
-        Adaptive updates (update_tolerance > 0, quasi-static RVEs): the increments are
-        composed, I + H_acc <- (I + dH)(I + H_acc), and an RVE is stepped only once
-        max |H_acc| reaches the tolerance or it has been deferred max_deferred_steps MPM
-        steps; it then takes the whole H_acc as one increment (the cell ends exactly at
-        (I + H_acc) h, as if it had followed every step) over
-        ceil(max |H_acc| / strain_per_substep) DEM steps. Meanwhile its stress is
+        Adaptive updates (update_tolerance > 0): the increments are composed,
+        I + H_acc <- (I + dH)(I + H_acc), and an RVE is stepped only once max |H_acc|
+        reaches the tolerance or it has been deferred max_deferred_steps MPM steps; it
+        then takes the whole H_acc as one increment (the cell ends exactly at
+        (I + H_acc) h, as if it had followed every step). Meanwhile its stress is
         predicted from its last update, R [sym(sigma) + C_aff : (U - I)] R^T with
-        I + H_acc = R U and C_aff the affine moduli (coupling/predictor.py): objective, and at
-        least as stiff as the RVE, so the waiting dissipates rather than feeds
-        oscillations (docs/coupling.md: the error is of the order of the affine modulus
-        times the tolerance, and does not accumulate).
+        I + H_acc = R U and C_aff the affine moduli (coupling/predictor.py): objective,
+        with an error of the order of the affine modulus times the tolerance that does
+        not accumulate (docs/coupling.md).
+        - quasi_static RVEs: the increment over ceil(max |H_acc| / strain_per_substep)
+          DEM steps of dt_crit;
+        - dynamic RVEs (sleeping): only an RVE at rest waits (`quiet`: its last update
+          left its grains near equilibrium and slow); one that is not is stepped every
+          step. A waking RVE that slept takes H_acc over whole DEM steps of this step's
+          dt_DEM lasting T = max(dt, min(t_acc, max|H_acc| d sqrt(rho_s / p) /
+          WAKE_INERTIAL)): its grains see the rate-independent regime's rate or slower,
+          or at most the macroscopic rate (T = t_acc, the slept time caught up). The slept
+          time is otherwise frozen: the grains' fluctuating motion resumes where it stood.
         """
         if dH.shape != (self.n_points, 3, 3):
             raise ValueError(f"dH of shape {dH.shape}: one (3, 3) increment per point of "
@@ -332,14 +358,19 @@ class RVEMaterial:
         if not self.groups:
             return
         t0 = time.perf_counter()
-        adaptive = self.update_tolerance > 0
+        # increments owed under a tolerance that a resume turned off (--allow-changed)
+        # are composed with this one and taken now: every RVE is then due
+        adaptive = self.update_tolerance > 0 or bool(self.t_acc.any())
         if adaptive:
+            slept = self.deferred > 0
             # (I + dH)(I + H) = I + dH + H + dH H
             self.H_acc = dH + self.H_acc + np.einsum("pab,pbc->pac", dH, self.H_acc)
             self.t_acc += dt
             inc = self.H_acc
             due = ((np.abs(inc).max(axis=(1, 2)) >= self.update_tolerance)
                    | (self.deferred + 1 >= self.max_deferred_steps))
+            if self.mode == "dynamic":
+                due |= ~self._per_point(self._quiet)
         else:
             inc = dH
         most = 0
@@ -348,6 +379,10 @@ class RVEMaterial:
                 n = max(self.min_substeps, math.ceil(dt / self.dt_crit - 1e-9))
                 nsteps = np.full(batch.n_rve, n, np.int64)
                 dt_dem = dt / n
+                if adaptive:
+                    woke = np.flatnonzero(due[rows] & slept[rows])
+                    if woke.size:
+                        nsteps[woke] = self._waking_steps(batch, rows, woke, n, dt_dem)
             else:
                 size = np.abs(inc[rows]).max(axis=(1, 2))
                 nsteps = np.maximum(self.min_substeps,
@@ -381,6 +416,8 @@ class RVEMaterial:
             taken = int(nsteps.sum())
             self.rve_steps += taken
             self.particle_steps += taken * batch.n_particles
+            self.dem_steps[rows] += nsteps
+            self.updates[rows] += nsteps > 0
             # particle- and contact-steps, and the end-of-increment evaluation of an RVE
             # that stepped (one more pass over its contacts, kernel.py item 8)
             self.work[rows] += (nsteps * (batch.n_particles + batch.ncontact)
@@ -401,6 +438,31 @@ class RVEMaterial:
             self.rve_updates += self.n_points
         self.substeps = most
         self.seconds += time.perf_counter() - t0
+
+    def _quiet(self, batch: RVEBatch) -> np.ndarray:
+        """(R,) the RVEs of a group at rest, from the state their last update reached:
+        under compression, unbalanced-force ratio <= QUIET_UNBALANCED and inertial
+        number of the fluctuating motion sqrt(2 E_k rho_s / (M p)) <= QUIET_INERTIAL."""
+        p = -np.trace(batch.stress, axis1=1, axis2=2) / 3.0
+        mass = self._constant(batch, "grain_mass")
+        quiet = (p > 0) & (batch.unbalanced <= QUIET_UNBALANCED)
+        i_v = np.sqrt(2.0 * batch.kinetic * self.params.density / (mass * np.where(quiet, p, 1.0)))
+        return quiet & (i_v <= QUIET_INERTIAL)
+
+    def _waking_steps(self, batch: RVEBatch, rows: np.ndarray, woke: np.ndarray, n: int,
+                      dt_dem: float) -> np.ndarray:
+        """DEM steps of dt_dem over which the dynamic RVEs `woke` of a group (which slept:
+        quiet, so under compression) take what they owe: T = max(dt, min(t_acc,
+        max|H_acc| d sqrt(rho_s / p) / WAKE_INERTIAL)) (`update`), d the mean grain
+        diameter, p the RVE's mean stress at its last update; n is one MPM step's."""
+        owed = np.abs(self.H_acc[rows[woke]]).max(axis=(1, 2))
+        p = -np.trace(batch.stress[woke], axis1=1, axis2=2) / 3.0
+        d = 2.0 * self._constant(batch, "mean_radius")[woke]
+        t_rate = np.where(p > 0, owed * d * np.sqrt(self.params.density / np.where(
+            p > 0, p, 1.0)) / WAKE_INERTIAL, np.inf)
+        t_slept = self.t_acc[rows[woke]]
+        steps = np.ceil(np.minimum(t_rate, t_slept) / dt_dem - 1e-9)
+        return np.maximum(steps, n).astype(np.int64)
 
     def _predicted(self, batch: RVEBatch, rows: np.ndarray, which: np.ndarray) -> np.ndarray:
         """(k,3,3) predicted stresses [Pa] of a group's waiting RVEs `which` (their points
@@ -558,6 +620,8 @@ class RVEMaterial:
         out["H_acc"] = self.H_acc.copy()
         out["deferred"] = self.deferred.copy()
         out["t_acc"] = self.t_acc.copy()
+        out["updates"] = self.updates.copy()
+        out["dem_steps"] = self.dem_steps.copy()
         return out
 
     def _longest_row(self, batch: RVEBatch) -> int:
@@ -620,15 +684,19 @@ class RVEMaterial:
         self.H_acc = np.asarray(state.get("H_acc", np.zeros((n, 3, 3))), float).copy()
         self.deferred = np.asarray(state.get("deferred", np.zeros(n)), np.int64).copy()
         self.t_acc = np.asarray(state.get("t_acc", np.zeros(n)), float).copy()
+        # absent in checkpoints before sleeping RVEs: counted from the resume
+        self.updates = np.asarray(state.get("updates", np.zeros(n)), np.int64).copy()
+        self.dem_steps = np.asarray(state.get("dem_steps", np.zeros(n)), np.int64).copy()
         self._forget_devices()
         # no refresh: the saved stress and moduli are already those of the saved state
 
     def point_fields(self) -> dict[str, np.ndarray]:
         """Per-point RVE quantities for VTK frames and history: porosity, coordination,
         mean accumulated rotation [rad] and its rate [rad/s] (seed Eq. 15, Fig. 15), the
-        RVE's own eps_v, its sphere count (which grows when its cell is retiled) and the
-        DEM steps it has taken since its packing was generated (where the DEM work goes:
-        their difference between two frames)."""
+        RVE's own eps_v, its sphere count (which grows when its cell is retiled), the
+        DEM steps it has taken since its packing was generated, and the DEM updates
+        and DEM steps it has taken since the run began (where the DEM work goes: their
+        difference between two frames; adaptive updates and sleeping RVEs skip some)."""
         if not self.groups:
             return {}
         for batch in self.groups if self.device == "cuda" else ():  # a kernel counter
@@ -644,6 +712,8 @@ class RVEMaterial:
             "rve_eps_v": self._per_point(homogenise.volumetric_strain),
             "rve_particles": self.particle_counts().astype(float),
             "rve_steps": self._per_point(lambda b: b.step_count).astype(float),
+            "rve_updates": self.updates.astype(float),
+            "rve_dem_steps": self.dem_steps.astype(float),
         }
 
     @staticmethod
@@ -657,7 +727,7 @@ class RVEMaterial:
         out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in STATE_FIELDS}
         out["rve_particles"] = np.concatenate([_counts(p) for p in parts])
         for key in ("theta_prev", "spin_rate", "assignment", "work", "rve_capacity", "H_acc",
-                    "deferred", "t_acc"):
+                    "deferred", "t_acc", "updates", "dem_steps"):
             if all(key in p for p in parts):
                 out[key] = np.concatenate([p[key] for p in parts])
         return out

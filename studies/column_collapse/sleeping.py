@@ -1,0 +1,108 @@
+"""Sleeping RVEs in the quick column collapse (docs/coupling.md, docs/validation.md §2.3).
+
+    python studies/column_collapse/sleeping.py run --out DIR [--tolerance 1e-6]
+        [--max-deferred 20] [--cfl-offset 0] [--threads N] [--case quick.toml]
+    python studies/column_collapse/sleeping.py compare RUN [RUN ...] [--after 3]
+
+`run`: the case (default examples/column_collapse/quick.toml) with sleeping RVEs
+(materials.sand.update_tolerance, max_deferred_steps; --tolerance 0: every RVE every
+step, the case as shipped) and the cost columns (dem_steps_per_rve, updates_per_rve) in
+its history, cfl times (1 + --cfl-offset) (a round-off realisation: 1e-9 and -1e-9 give
+the realisations of §2.3), into DIR; resumed from DIR's newest checkpoint where it holds
+one. `compare`: per run, studies/column_spread.py's measures at the last row (front, 99 %
+and 95 % of the mass, H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
+share of RVEs stepped, over the run and after --after tau_c (from the history's
+cumulative cost columns; cost.json covers one invocation). The last line is one JSON
+object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import grainscale as gs
+from grainscale.analysis import read_columns
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "studies"))
+from column_spread import measures  # noqa: E402
+
+QUICK = ROOT / "examples" / "column_collapse" / "quick.toml"
+COST = ["dem_steps_per_rve", "updates_per_rve"]
+
+
+def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: float
+                  ) -> gs.Case:
+    c = gs.load_case(case)
+    for m in c.materials.values():
+        if m.type == "dem":
+            m.update_tolerance = tolerance
+            m.max_deferred_steps = max_deferred
+    c.solver.cfl *= 1.0 + cfl_offset
+    c.output.history = [*c.output.history, *(k for k in COST if k not in c.output.history)]
+    if tolerance > 0:
+        c.title += f", sleeping RVEs (tolerance {tolerance:g}, {max_deferred} steps)"
+    return c
+
+
+def run(args) -> None:
+    case = sleeping_case(args.case, args.tolerance, args.max_deferred, args.cfl_offset).check()
+    resume = any((args.out / n).is_file() for n in ("checkpoint.h5", "checkpoint.prev.h5"))
+    gs.run(case, args.out, resume=resume, threads=args.threads)
+
+
+def cost(run_dir: Path, after: float) -> dict:
+    """DEM steps per RVE and MPM step and the share of RVEs stepped, over the run and
+    after t/tau_c = `after`, from the history's cumulative columns."""
+    h = read_columns(run_dir / "history.csv")
+    missing = [k for k in COST if k not in h]
+    if missing:
+        raise SystemExit(f"{run_dir}/history.csv: no {missing} (run it with this script)")
+    step = h["step"]
+    out = {"dem_steps_per_rve_per_step": float(h["dem_steps_per_rve"][-1] / step[-1]),
+           "fraction_of_rves_stepped": float(h["updates_per_rve"][-1] / step[-1])}
+    k = int(np.searchsorted(h["t_over_tc"], after))
+    if k < len(step) - 1:
+        n = step[-1] - step[k]
+        out[f"after_{after:g}_tau_c"] = {
+            "dem_steps_per_rve_per_step": float(
+                (h["dem_steps_per_rve"][-1] - h["dem_steps_per_rve"][k]) / n),
+            "fraction_of_rves_stepped": float(
+                (h["updates_per_rve"][-1] - h["updates_per_rve"][k]) / n),
+            "from_t_over_tc": float(h["t_over_tc"][k])}
+    return out
+
+
+def compare(args) -> None:
+    rows = []
+    for r in args.runs:
+        length = gs.open_result(r).case.output.column.length
+        rows.append({**measures(r, length), **cost(r, args.after)})
+        print(json.dumps(rows[-1]))
+    print(json.dumps({"runs": rows}))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--case", type=Path, default=QUICK)
+    r.add_argument("--tolerance", type=float, default=1e-6)
+    r.add_argument("--max-deferred", type=int, default=20)
+    r.add_argument("--cfl-offset", type=float, default=0.0)
+    r.add_argument("--threads", type=int)
+    c = sub.add_parser("compare")
+    c.add_argument("runs", type=Path, nargs="+")
+    c.add_argument("--after", type=float, default=3.0, help="t/tau_c of the late window")
+    args = ap.parse_args()
+    run(args) if args.cmd == "run" else compare(args)
+
+
+if __name__ == "__main__":
+    main()
