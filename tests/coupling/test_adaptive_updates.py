@@ -324,11 +324,11 @@ def test_increments_owed_when_the_tolerance_is_turned_off_are_applied(packing):
 
 def test_the_tolerance_is_bounded_for_each_time_integration(packing, tmp_path):
     params, pack = packing
-    with pytest.raises(ValueError, match=r"update_tolerance = 0.001 with mode 'dynamic': "
-                                         r"valid 0 to 0.0001"):
-        RVEMaterial("sand", params, [pack], n_points=1, update_tolerance=1e-3)
+    with pytest.raises(ValueError, match=r"update_tolerance = 0.0001 with mode 'dynamic': "
+                                         r"valid 0 to 3e-05"):
+        RVEMaterial("sand", params, [pack], n_points=1, update_tolerance=1e-4)
     assert RVEMaterial("sand", params, [pack], n_points=1,
-                       update_tolerance=1e-4).update_tolerance == 1e-4
+                       update_tolerance=3e-5).update_tolerance == 3e-5
     from grainscale.config.base import ConfigError
     from grainscale.config.case import load_case
 
@@ -336,9 +336,9 @@ def test_the_tolerance_is_bounded_for_each_time_integration(packing, tmp_path):
     text = open(__file__.replace("tests/coupling/test_adaptive_updates.py",
                                  "examples/unit_element/case.toml")).read()
     case.write_text(text.replace('time_integration = "dynamic"',
-                                 'time_integration = "dynamic"\nupdate_tolerance = 2e-4'))
-    with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 0.0002: "
-                                          r"above 0.0001 for dynamic RVEs; valid: 0 to 0.0001"):
+                                 'time_integration = "dynamic"\nupdate_tolerance = 4e-5'))
+    with pytest.raises(ConfigError, match=r"materials\.sand\.update_tolerance = 4e-05: "
+                                          r"above 3e-05 for dynamic RVEs; valid: 0 to 3e-05"):
         load_case(case)
     case.write_text(text.replace('time_integration = "dynamic"',
                                  'time_integration = "dynamic"\nupdate_tolerance = 1e-6'))

@@ -35,7 +35,7 @@ FLIP_DEFAULT = 0.99  # solver.flip when velocity_update = "flip" and no flip is 
 STRAIN_PER_SUBSTEP = 3e-6  # quasi-static RVEs: strain per DEM step, undamped (validation §3.1)
 
 
-SLEEP_TOLERANCE_MAX = 1e-4  # dynamic RVEs: the largest update_tolerance (docs/coupling.md)
+SLEEP_TOLERANCE_MAX = 3e-5  # dynamic RVEs: the largest update_tolerance (docs/coupling.md)
 
 
 def default_update_tolerance(time_integration: str, strain_per_substep: float) -> float:

@@ -85,11 +85,15 @@ _DEM = DEMMaterialCfg(type="dem")  # the case file's defaults are the only ones
 SLOT_MARGIN = 3
 CHUNK_BYTES = 256 * 2**20  # a checkpoint gathers a device-built batch this much at a time
 
-# Sleeping RVEs (dynamic, update_tolerance > 0; docs/coupling.md). An RVE is at rest when
-# its grains are near equilibrium, the unbalanced-force ratio (mean |net force| over the
-# mean contact force) at most QUIET_UNBALANCED, and their fluctuating motion is slow, its
-# inertial number I_v = sqrt(2 E_k rho_s / (M p)) (the inertial number of a shear rate
-# v'/d, v' = sqrt(2 E_k / M) the grains' fluctuation speed) at most QUIET_INERTIAL.
+# Sleeping RVEs (dynamic, update_tolerance > 0; docs/coupling.md). An RVE is at rest when,
+# under compression (p > 0), its grains are near equilibrium, the unbalanced-force ratio
+# u (mean |net force| over the mean contact force) at most QUIET_UNBALANCED and u p at most
+# max_k M_k tol (the stress its imbalance can still release is below what the tolerance
+# resolves), and their fluctuating motion is slow: the inertial number of a shear rate
+# v'/d, I_v = v' sqrt(rho_s / p) with v' = sqrt(2 E_k / M) the grains' fluctuation speed,
+# at most QUIET_INERTIAL (velocity fluctuations in slow dense flow scale as
+# v' ~ gamma_dot d I^(-1/3), so I_v ~ I^(2/3): 0.01 is a flow at I ~ 1e-3; the kinetic
+# stress is then below 2e-5 p).
 QUIET_UNBALANCED = 0.05
 QUIET_INERTIAL = 0.01
 # a waking RVE takes what it owes over at least the time that keeps its inertial number
@@ -441,11 +445,14 @@ class RVEMaterial:
 
     def _quiet(self, batch: RVEBatch) -> np.ndarray:
         """(R,) the RVEs of a group at rest, from the state their last update reached:
-        under compression, unbalanced-force ratio <= QUIET_UNBALANCED and inertial
-        number of the fluctuating motion sqrt(2 E_k rho_s / (M p)) <= QUIET_INERTIAL."""
+        p > 0, unbalanced-force ratio u <= QUIET_UNBALANCED with u p <= max_k M_k tol, and
+        inertial number of the fluctuating motion sqrt(2 E_k rho_s / (M p)) <=
+        QUIET_INERTIAL (the comment at QUIET_UNBALANCED)."""
         p = -np.trace(batch.stress, axis1=1, axis2=2) / 3.0
         mass = self._constant(batch, "grain_mass")
-        quiet = (p > 0) & (batch.unbalanced <= QUIET_UNBALANCED)
+        m_k = np.diagonal(batch.stiffness, axis1=1, axis2=2).max(axis=1)
+        quiet = ((p > 0) & (batch.unbalanced <= QUIET_UNBALANCED)
+                 & (batch.unbalanced * p <= m_k * self.update_tolerance))
         i_v = np.sqrt(2.0 * batch.kinetic * self.params.density / (mass * np.where(quiet, p, 1.0)))
         return quiet & (i_v <= QUIET_INERTIAL)
 
