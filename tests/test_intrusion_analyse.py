@@ -284,3 +284,109 @@ def test_labels_name_the_runs_in_table_and_plot(tmp_path, capsys):
     assert "4 cells" in out.splitlines()[1] and "6 cells" in out.splitlines()[2]
     code, out, err = run_main(capsys, [a, b, "--phi", 25.0, "--labels", "one"])
     assert code == 2 and "--labels: 1 given for 2 runs" in err
+
+
+# --------------------------------------------------------------- linearity and uncertainty
+PERIOD = 0.25  # d/R: the reduced cases' ripple (one 0.125 m cell over R = 0.5 m)
+
+
+def test_a_straight_line_with_a_ripple_is_linear_and_its_local_slope_is_its_slope():
+    """A line of slope 20 with a one-cell ripple of amplitude 3 (no scatter): the means over whole
+    ripple periods lie on the line, so every local slope is 20 (1e-9: the ripple of each
+    period's ten evenly spaced rows sums to zero), the curvature is 0 and the test calls
+    it linear; the model error is zero too."""
+    x = np.arange(0.0, 2.0 + 1e-9, 0.025)
+    y = 20.0 * x + 3.0 * np.sin(2.0 * np.pi * x / PERIOD)
+    lin = analyse.linearity(x, y, 0.0, PERIOD)
+    assert lin["periods"] == 8 and len(lin["local_slopes"]) == 7
+    for _, k in lin["local_slopes"]:
+        assert k == pytest.approx(20.0, rel=1e-9)
+    assert lin["linear"] is True and abs(lin["curvature"]) < 1e-9
+    assert lin["K_blocks"] == pytest.approx(20.0, rel=1e-12)
+    assert lin["model_error"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_curvature_is_measured_and_a_curved_window_is_not_linear():
+    """y = 20 x + 4 x^2 with a 10 % ripple and scatter 0.05 on d/R 0-2: the curvature
+    comes back as 4 (within 3 standard errors), t is far beyond t95 so the window is
+    not linear; the local slope between periods is 20 + 8 d (its value at their midpoint,
+    exact for a quadratic up to the ripple's share); the slopes of the first and last
+    halves differ by 2 c times the distance of their centres (1 R), so the model error,
+    half that, is c x 1 = 4 (within its scatter), and K_phi_u includes it."""
+    x = np.arange(0.0, 2.0 + 1e-9, 0.025)
+    y = 20.0 * x + 4.0 * x * x + 0.3 * np.sin(2.0 * np.pi * x / PERIOD) \
+        + np.random.default_rng(3).normal(0.0, 0.05, x.size)
+    lin = analyse.linearity(x, y, 0.0, PERIOD)
+    assert lin["curvature"] == pytest.approx(4.0, abs=3 * lin["curvature_se"])
+    assert lin["linear"] is False and lin["curvature_t"] > 3 * lin["curvature_t95"]
+    assert lin["slope_change"] == pytest.approx(2 * lin["curvature"] * 1.75, rel=1e-12)
+    for d, k in lin["local_slopes"]:
+        assert k == pytest.approx(20.0 + 8.0 * d, abs=0.3)
+    assert lin["model_error"] == pytest.approx(4.0, abs=0.3)
+    assert lin["K_phi_u"] >= lin["model_error"] and lin["K_phi_u"] >= lin["K_blocks_se"]
+
+
+def test_the_window_rule_leaves_a_curved_start_out_without_bias():
+    """40 curves that approach a line of slope 20 from a concave start (joined at d/R
+    0.3, p0 = 6) with scatter 0.3: the rule's start has a median of at least 0.2, and the
+    slope's bias over the 40 is below 0.6 of its spread between them (measured 0.37;
+    a rule that accepted slope changes of 6 instead of 2 standard deviations starts
+    earlier, at 0.15, and is biased by 1.5 of its spread)."""
+    x = np.arange(0.0, 2.0 + 1e-9, 0.025)
+    starts, slopes = [], []
+    for seed in range(40):
+        y = curve(x, 20.0, 6.0) + np.random.default_rng(seed).normal(0.0, 0.3, x.size)
+        s, rule = analyse.choose_start(x, y, 0.002, 0.4, PERIOD)
+        assert rule == "auto"
+        starts.append(s)
+        slopes.append(analyse.fit_window(x, y, s)["slope"])
+    assert np.median(starts) >= 0.2 - 1e-9
+    assert abs(np.mean(slopes) - 20.0) < 0.6 * np.std(slopes), (np.mean(slopes),
+                                                                np.std(slopes))
+
+
+def test_the_rule_starts_where_the_curve_has_become_a_line():
+    """A curve that bends until d/R 1.2 (quadratic, slope 20 reached there) then is a
+    line with a 0.3 ripple: windows from before 1.2 fail the linearity test, so the
+    rule's window starts at or beyond 0.9 (the test has little power over the last
+    curved periods) and its slope is 20 within 5 %."""
+    x = np.arange(0.0, 2.5 + 1e-9, 0.025)
+    bend = 1.2
+    y = np.where(x < bend, 20.0 * x + 10.0 * (bend - x) ** 2, 20.0 * x) \
+        + 0.3 * np.sin(2.0 * np.pi * x / PERIOD)
+    s, rule = analyse.choose_start(x, y, 0.002, 0.4, PERIOD)
+    assert rule == "auto" and s >= 0.9, s
+    assert analyse.linearity(x, y, 0.0, PERIOD)["linear"] is False
+    assert analyse.fit_window(x, y, s)["slope"] == pytest.approx(20.0, rel=0.05)
+
+
+def test_standard_errors_are_the_ols_ones():
+    """linear_fit's standard errors against the covariance s^2 (X^T X)^-1 computed with
+    numpy's matrix algebra, s^2 = rss / (n - 2), on six scattered rows (where n - 2 and
+    n differ by 22 % in the error and the intercept's 1/n term is most of it)."""
+    rng = np.random.default_rng(7)
+    x = np.array([0.1, 0.4, 0.5, 0.9, 1.3, 1.6])
+    y = 3.0 + 12.0 * x + rng.normal(0.0, 0.5, x.size)
+    f = analyse.linear_fit(x, y)
+    design = np.stack([np.ones_like(x), x], axis=1)
+    coef, rss, *_ = np.linalg.lstsq(design, y, rcond=None)
+    cov = rss[0] / (x.size - 2) * np.linalg.inv(design.T @ design)
+    assert (f["intercept"], f["slope"]) == pytest.approx(tuple(coef), rel=1e-12)
+    assert f["slope_se"] == pytest.approx(np.sqrt(cov[1, 1]), rel=1e-12)
+    assert f["intercept_se"] == pytest.approx(np.sqrt(cov[0, 0]), rel=1e-12)
+
+
+def test_the_ripple_period_comes_from_the_case(tmp_path, capsys):
+    """The period is the grid's cell along the motion over R (depth / depth_over_R): a
+    uniform grid's cell_size, a graded axis's fine cell; the default where the case does
+    not give it."""
+    h = {"depth": np.array([0.0, 0.25, 0.5]), "depth_over_R": np.array([0.0, 0.5, 1.0])}
+    rigid = {"velocity": [0.0, 0.0, -0.25]}
+    assert analyse.ripple_period({"grid": {"cell_size": 0.125}, "rigid": rigid}, h) == 0.25
+    graded = {"grid": {"nodes_z": {"cell": 0.0625}}, "rigid": rigid}
+    assert analyse.ripple_period(graded, h) == 0.125
+    assert analyse.ripple_period({"grid": {"cell_size": 0.125}, "rigid": {}}, h) is None
+    run = write_run(tmp_path / "r", 20.0, 2.0, seed=0)
+    code, out, err = run_main(capsys, [run, "--phi", 26.0, "--png", tmp_path / "p.png"])
+    r = json.loads(out.strip().splitlines()[-1])["runs"][0]
+    assert (r["period"], r["period_source"]) == (analyse.PERIOD_DEFAULT, "default")

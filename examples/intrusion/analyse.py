@@ -13,9 +13,10 @@ out. The label of a run is its folder name and, from case.resolved.toml, the int
 For each run, the steady regime p_u/(rho g R) = K_phi d/R + p_0 is fitted by least
 squares over d/R in [s, d_max], d_max the deepest row (or the deepest at d/R <= --to:
 runs that went to different depths compared over the same span). The window start s is,
-by default, chosen by a slope-stability rule: s is the smallest of 0, 0.05, 0.10, ...
-(in units of R) such that moving the start 0.1 R and 0.2 R deeper changes the fitted
-slope K(s) by less than
+by default, the smallest of 0, 0.05, 0.10, ... (in units of R) whose window passes the
+linearity test below (where it holds at least 4 ripple periods) and a slope-stability
+rule: moving the start 0.1 R and 0.2 R deeper changes the fitted slope K(s) by less
+than
 
     max(tol K(s), 2 sqrt(sigma^2 (1/Sxx' - 1/Sxx)))
 
@@ -41,6 +42,26 @@ shortest window (from d_max - min_span) is used and the rule is reported as "fal
 
 The standard errors are ordinary least squares ones (independent residuals assumed); the
 reaction's ripple with depth is correlated, so read them as lower bounds.
+
+Is it a line, and how well is its slope known? (`linearity`.) The no-slip reaction
+ripples with the grid: the set of driven nodes changes each time the base crosses a node
+layer, a period P of one cell along the motion over R (from case.resolved.toml and the
+history; 0.25 where they do not give it). Over evenly spaced rows a whole period of a
+periodic ripple averages out, so the window is cut into whole periods and their means
+are the data of three measures:
+- the local slope between consecutive periods (`local_slopes`): the slope against depth
+  with the ripple averaged out;
+- the linearity test: a quadratic through the period means; the window is `linear` when
+  its curvature's |t| = |c / se(c)| is within Student's 95 % quantile (m - 3 dof, m
+  periods; no test below 4 periods), and `slope_change` = 2 c x span says how much the
+  local slope changes over the window;
+- the slope's uncertainty with the model error, `K_phi_u` = sqrt(se_b^2 + e_m^2): se_b the
+  standard error of the period means' slope (m - 2 dof: the means of distinct periods are
+  close to independent, which the rows are not) and e_m half the difference between the
+  slopes of the first and the last half of the periods, how much the slope depends on
+  where along the window it is measured (for y = a + b d + c d^2 it is c times the
+  distance of the halves' centres), which a straight-line fit leaves out. A straight
+  window's e_m is its scatter's; a curved one's is the curvature's.
 
 Theory: K_theory = k_phi(phi) from grainscale.analysis (seed Eq. 27-29, Kang et
 al. 2018, Eq. 29c without the printed inner R), phi the friction angle measured on the
@@ -75,11 +96,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import grainscale as gs  # noqa: E402
-from grainscale.analysis import k_phi, phi_for_k  # noqa: E402
+from grainscale.analysis import k_phi, phi_for_k, t95  # noqa: E402
 
 REQUIRED = ("depth_over_R", "force_normalized")
 START_STEP = 0.05   # R: spacing of candidate window starts
 START_SHIFTS = (0.1, 0.2)  # R: the start is moved this much deeper to test the slope
+PERIOD_DEFAULT = 0.25  # d/R: the ripple's period where the case does not give it (one
+#                        0.125 m cell over R = 0.5 m, the reduced cases)
+MIN_BLOCKS = 4  # ripple periods a window needs for the linearity test (a quadratic: 1 dof)
 
 
 class InputError(Exception):
@@ -115,15 +139,37 @@ def load_run(out: Path) -> dict:
     x, y = h["depth_over_R"][keep], h["force_normalized"][keep]
     if x.size < 4:
         raise InputError(f"{path}: {x.size} rows in the intrusion stage (time >= 0), need 4")
-    shape = None
+    shape, period = None, None
     case = out / "case.resolved.toml"
     if case.is_file():
         try:
-            shape = tomllib.loads(case.read_text()).get("rigid", {}).get("shape")
+            resolved = tomllib.loads(case.read_text())
         except tomllib.TOMLDecodeError as err:
             raise InputError(f"{case}: {err}") from None
+        shape = resolved.get("rigid", {}).get("shape")
+        period = ripple_period(resolved, h)
     return {"label": f"{name} ({shape})" if shape else name, "folder": str(out),
-            "shape": shape, "x": x, "y": y}
+            "shape": shape, "x": x, "y": y,
+            "period": period or PERIOD_DEFAULT,
+            "period_source": "case" if period else "default"}
+
+
+def ripple_period(resolved: dict, h: dict[str, np.ndarray]) -> float | None:
+    """The no-slip ripple's period in d/R: the grid's cell along the intruder's motion
+    (the set of driven nodes changes each time its base crosses a node layer; a graded
+    axis: its fine cells, where the intruder is), over R (depth / depth_over_R of the
+    history); None where the case or history does not give them."""
+    grid, rigid = resolved.get("grid", {}), resolved.get("rigid", {})
+    velocity = rigid.get("velocity")
+    if velocity is None or "depth" not in h or sum(v != 0.0 for v in velocity) != 1:
+        return None
+    axis = "xyz"[next(i for i, v in enumerate(velocity) if v != 0.0)]
+    cell = grid.get("cell_size") or grid.get(f"nodes_{axis}", {}).get("cell")
+    deep = np.abs(h["depth_over_R"]) > 1e-9
+    if not cell or not deep.any():
+        return None
+    radius = float(np.median(h["depth"][deep] / h["depth_over_R"][deep]))
+    return float(cell) / radius
 
 
 def linear_fit(x: np.ndarray, y: np.ndarray) -> dict[str, float]:
@@ -147,8 +193,74 @@ def fit_window(x, y, start: float) -> dict[str, float]:
     return linear_fit(x[sel], y[sel])
 
 
-def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
-    """The slope-stability rule (module docstring): (start, 'auto' or 'fallback')."""
+def period_means(x, y, start: float, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """Means of x and y over the whole ripple periods [start + k P, start + (k+1) P) of
+    the rows from `start` on: over evenly spaced rows a whole period of a periodic ripple
+    averages out, and the means of distinct periods are close to independent."""
+    xb, yb = [], []
+    # a period is whole when its rows reach to within half a row spacing of its end
+    half_row = 0.5 * float(np.median(np.diff(x))) if x.size > 1 else 0.0
+    for k in range(int(math.floor((x.max() + half_row - start) / period + 1e-9))):
+        sel = (x >= start + k * period - 1e-12) & (x < start + (k + 1) * period - 1e-12)
+        if np.count_nonzero(sel) >= 2:
+            xb.append(x[sel].mean())
+            yb.append(y[sel].mean())
+    return np.array(xb), np.array(yb)
+
+
+def quadratic_fit(x: np.ndarray, y: np.ndarray) -> dict[str, float]:
+    """y = a + b x + c x^2 by least squares: c and its OLS standard error (n - 3 dof)."""
+    xm = x.mean()
+    design = np.stack([np.ones_like(x), x - xm, (x - xm) ** 2], axis=1)
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    rss = float(np.sum((y - design @ coef) ** 2))
+    dof = x.size - 3
+    cov = rss / dof * np.linalg.inv(design.T @ design) if dof > 0 else np.full((3, 3), np.inf)
+    return {"c": float(coef[2]), "c_se": float(np.sqrt(cov[2, 2])), "dof": dof}
+
+
+def linearity(x, y, start: float, period: float) -> dict:
+    """Whether the rows from `start` on are a straight line, and how well its slope is
+    known, from the means over whole ripple periods (period_means; m of them):
+    - `local_slopes`: [(d/R, slope)] between consecutive periods: the slope against
+      depth with the ripple averaged out;
+    - the curvature c of a quadratic through the period means and its t = c / se(c)
+      (m - 3 dof): `linear` when |t| <= t95(m - 3) (None with fewer than MIN_BLOCKS
+      periods: no test), and `slope_change`, 2 c times the window's span: how much the
+      local slope changes over the window by that curvature;
+    - the slope of the period means (`K_blocks`) with its standard error (m - 2 dof; the
+      rows' own standard error treats the correlated ripple as independent scatter);
+    - `model_error`: half the difference between the slopes of the first and the last
+      max(2, m // 2) periods: how much the slope depends on where along the window it
+      is measured, which a straight-line fit leaves out;
+    - `K_phi_u`: sqrt(se_blocks^2 + model_error^2), the slope's uncertainty with both."""
+    xb, yb = period_means(x, y, start, period)
+    m = xb.size
+    out = {"period": period, "periods": int(m), "linear": None,
+           "local_slopes": [[float((xb[i] + xb[i + 1]) / 2), float((yb[i + 1] - yb[i])
+                                                                   / (xb[i + 1] - xb[i]))]
+                            for i in range(m - 1)]}
+    if m >= 3:
+        b = linear_fit(xb, yb)
+        h = max(2, m // 2)
+        early, late = linear_fit(xb[:h], yb[:h]), linear_fit(xb[-h:], yb[-h:])
+        out.update(K_blocks=b["slope"], K_blocks_se=b["slope_se"],
+                   model_error=abs(late["slope"] - early["slope"]) / 2.0)
+        out["K_phi_u"] = float(math.hypot(b["slope_se"], out["model_error"]))
+    if m >= MIN_BLOCKS:
+        q = quadratic_fit(xb, yb)
+        t = q["c"] / q["c_se"] if q["c_se"] > 0 else (0.0 if q["c"] == 0 else math.inf)
+        out.update(curvature=q["c"], curvature_se=q["c_se"], curvature_t=float(t),
+                   curvature_t95=t95(q["dof"]), linear=bool(abs(t) <= t95(q["dof"])),
+                   slope_change=float(2.0 * q["c"] * (xb[-1] - xb[0])))
+    return out
+
+
+def choose_start(x, y, tol: float, min_span: float, period: float = PERIOD_DEFAULT
+                 ) -> tuple[float, str]:
+    """The window start (module docstring): the first candidate whose window passes the
+    slope-stability rule and, where it holds MIN_BLOCKS ripple periods, the linearity
+    test; (start, 'auto' or 'fallback')."""
     d_max = float(x.max())
     last = d_max - min_span
     if last < 0.0:
@@ -156,6 +268,7 @@ def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
                          f"{min_span:g}")
     k = 0
     while (s := k * START_STEP) + max(START_SHIFTS) <= last + 1e-9:
+        k += 1
         a = fit_window(x, y, s)
         for shift in START_SHIFTS:
             b = fit_window(x, y, s + shift)
@@ -163,8 +276,8 @@ def choose_start(x, y, tol: float, min_span: float) -> tuple[float, str]:
             if abs(b["slope"] - a["slope"]) >= max(tol * abs(a["slope"]), spread):
                 break
         else:
-            return s, "auto"
-        k += 1
+            if linearity(x, y, s, period)["linear"] is not False:
+                return s, "auto"
     return last, "fallback"
 
 
@@ -192,8 +305,9 @@ def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
     for r in runs:
         try:
             s, rule = (start, "fixed") if start is not None else \
-                choose_start(r["x"], r["y"], tol, min_span)
+                choose_start(r["x"], r["y"], tol, min_span, r["period"])
             f = fit_window(r["x"], r["y"], s)
+            lin = linearity(r["x"], r["y"], s, r["period"])
         except InputError as err:
             raise InputError(f"{r['folder']}: {err}") from None
         # the ripple: each fitted row's departure from the line, in % of the rows' mean
@@ -212,7 +326,8 @@ def analyse(outs: list[Path], phi_deg: float, start: float | None = None,
             "window_rule": rule, "rows_fitted": f["n"],
             "ripple_rms_pct": float(np.sqrt(np.mean(dev ** 2))),
             "ripple_range_pct": [float(dev.min()), float(dev.max())],
-            "depth_over_R_max": float(r["x"].max()), "phi_implied_deg": implied})
+            "depth_over_R_max": float(r["x"].max()), "phi_implied_deg": implied,
+            "period_source": r["period_source"], **lin})
     first = results[0]
     summary = {"K_phi": first["K_phi"], "K_phi_stderr": first["K_phi_stderr"],
                "p_0": first["p_0"], "phi_deg": phi_deg, "K_theory": k_theory,

@@ -26,6 +26,16 @@ from grainscale.io.vtk import read_points_vtu as read_frame
 from grainscale.stress import p_q
 from grainscale.theory.archimedes import k_phi, phi_for_k
 
+# two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
+T95 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179,
+       2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064,
+       2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
+
+
+def t95(dof: int) -> float:
+    """Student t, 95 % two-sided; beyond 30 dof 1.96 + 2.5/dof (within 0.1 % there)."""
+    return T95[dof - 1] if dof <= len(T95) else 1.96 + 2.5 / dof
+
 
 def read_columns(path: str | Path) -> dict[str, np.ndarray]:
     """Columns of a CSV with '#' comment lines and a header row.

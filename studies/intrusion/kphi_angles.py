@@ -30,10 +30,17 @@ the zone carried with the intruder at d/R 1, 1.5 and 2 (examples/intrusion/stagn
 --field velocity, its default --carried share) in stagnant.json: what `table` reads, so
 the table and figure are rebuilt from the repository after the run folders are gone.
 
-`table`: for each collected run, K_phi and p_0 by analyse.py's rule (window start by the
-slope-stability rule, standard errors), against Kang's law at the RVE's steady and peak
-angles (their 95 % bands); the twins at their angle. A multiscale K_phi follows an angle
-definition when it lies within 25 % of the law at that angle. Writes the figure (left:
+`table`: for each collected run, K_phi and p_0 by analyse.py's rule (the window start by
+the linearity test and slope stability; the standard error and the uncertainty with the
+model error, K_phi_u), over the rule's window and over each of WINDOWS (d/R 0-2 and
+1-2), against Kang's law at the steady and peak angles of the bed's own packings (the
+first `library` of the recipe's, from the per-packing angles of PHI_FILES, with their
+95 % band); the twins at their angle. A multiscale K_phi follows an angle definition
+when it lies within 25 % of the law at that angle; the verdict is "undecided" when
+K_phi +- K_phi_u straddles an edge of that band. A slope is "steady" when the rule's
+window is at least --min-window long and linear. Cuboid / cylinder (same eta_r and
+library) and multiscale / twin (the twin at the recipe's angle) ratios are taken over the
+common span of their windows. Writes the figure (left:
 p_u/(rho g R) against d/R of every run with its fit; right: K_phi against phi, the
 multiscale points at their steady angle, filled, and at their peak angle, open, with
 their bands; the twins; Kang's law over 15-45 deg; the seed's point) and prints the
@@ -44,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import subprocess
 import sys
@@ -66,6 +74,9 @@ CASES = ROOT / "examples" / "intrusion"
 sys.path.insert(0, str(CASES))
 from analyse import InputError, analyse, load_run  # noqa: E402
 
+sys.path.insert(0, str(HERE))
+from friction_angle import summary as angle_summary  # noqa: E402
+
 SHAPES = {"cylinder": CASES / "noslip.toml", "cuboid": CASES / "noslip_cuboid.toml"}
 DATA = HERE / "data" / "noslip"
 ALPHA_R = 1.0  # rolling stiffness: sets the DEM step, not the angle (docs/validation.md §3)
@@ -73,6 +84,7 @@ PHI_FILES = {0.0: "q_e0.json", 0.05: "q_a1_e0.05.json", 0.1: "q_a1_e0.1.json",
              0.15: "q_a1_e0.15.json", 0.2: "q_a1_e0.2.json", 0.3: "q_a1_e0.3.json"}
 SEED_POINT = (26.8, 1.5, 23.0)  # seed §4.3: repose angle +- its spread [deg], K_phi
 FOLLOWS = 0.25  # a K_phi "follows" an angle definition within this share of the law
+WINDOWS = ((0.0, 2.0), (1.0, 2.0))  # d/R: fixed windows every verdict is also stated on
 CARRIED_AT = (1.0, 1.5, 2.0)  # d/R of the carried-depth frames
 
 
@@ -146,15 +158,61 @@ def collect(run_dir: Path, name: str, eta_r: float | None, twin_phi: float | Non
     return to
 
 
-def fit(folder: Path, phi: float, min_window: float) -> dict:
-    """analyse.py's rule on one collected run: K_phi, p_0, their standard errors, window."""
+def fit(folder: Path, phi: float, min_window: float, start: float | None = None,
+        stop: float | None = None) -> dict:
+    """analyse.py on one collected run: K_phi, p_0, their standard errors, the window (the
+    rule's, or [start, stop] where given), its linearity test and the slope's uncertainty
+    with the model error (K_phi_u; analyse.linearity). `steady`: the rule's window is at
+    least min_window long and passed the linearity test."""
     try:
         with tempfile.TemporaryDirectory() as tmp:  # analyse() plots; `table` draws its own
-            r = analyse([folder], phi, png=Path(tmp) / "fit.png")["runs"][0]
+            r = analyse([folder], phi, start=start, stop=stop,
+                        png=Path(tmp) / "fit.png")["runs"][0]
     except InputError as err:
         raise SystemExit(str(err)) from None
-    r["steady"] = r["window"][1] - r["window"][0] >= min_window - 1e-9
+    r["steady"] = bool(r["window"][1] - r["window"][0] >= min_window - 1e-9
+                       and r["linear"] is not False and r["window_rule"] != "fallback")
     return r
+
+
+def verdict(k: float, u: float, law: float) -> str:
+    """Whether a slope K +- u follows a law's value (within FOLLOWS of it): "follows" or
+    "not", firm when all of [K - u, K + u] lies on one side of the band's edges, else
+    "undecided" (the uncertainty straddles an edge)."""
+    lo, hi = (k - u) / law, (k + u) / law
+    if 1 - FOLLOWS <= lo and hi <= 1 + FOLLOWS:
+        return "follows"
+    if hi < 1 - FOLLOWS or lo > 1 + FOLLOWS:
+        return "not"
+    return "undecided"
+
+
+def bed_angles(meta: dict, library: int) -> dict:
+    """The steady and peak angles of the bed's own packings (the first `library` of the
+    recipe's, friction_angle.py's per-packing results) with their 95 % bands, and the
+    recipe's (all packings measured) beside them."""
+    phi = json.loads((ROOT / meta["phi_file"]).read_text())
+    steady, peak = phi["phi_per_packing_deg"], phi["peak_phi_per_packing_deg"]
+    if library > len(steady):
+        raise SystemExit(f"{meta['phi_file']}: {len(steady)} packings measured, the bed "
+                         f"holds {library}; measure them (friction_angle.py --realisations)")
+    s, sb = angle_summary(np.array(steady[:library]))
+    p, pb = angle_summary(np.array(peak[:library]))
+    return {"library": library, "phi_deg": round(s, 2), "phi_band95_deg": round(sb, 2),
+            "peak_phi_deg": round(p, 2), "peak_phi_band95_deg": round(pb, 2),
+            "phi_recipe_deg": phi["phi_deg"], "peak_phi_recipe_deg": phi["peak_phi_deg"]}
+
+
+def common_ratio(folder_a: Path, a: dict, folder_b: Path, b: dict) -> dict:
+    """K_a / K_b fitted over the two rule windows' common span, with its uncertainty
+    from both K_phi_u."""
+    lo, hi = max(a["window"][0], b["window"][0]), min(a["window"][1], b["window"][1])
+    fa = fit(folder_a, 20.0, 0.0, start=lo, stop=hi + 1e-9)
+    fb = fit(folder_b, 20.0, 0.0, start=lo, stop=hi + 1e-9)
+    ratio = fa["K_phi"] / fb["K_phi"]
+    rel = math.hypot(fa.get("K_phi_u", fa["K_phi_stderr"]) / fa["K_phi"],
+                     fb.get("K_phi_u", fb["K_phi_stderr"]) / fb["K_phi"])
+    return {"window": [lo, hi], "ratio": ratio, "ratio_u": ratio * rel}
 
 
 def rows(data: Path, min_window: float) -> list[dict]:
@@ -166,10 +224,10 @@ def rows(data: Path, min_window: float) -> list[dict]:
                "cell_m": tomllib.loads((folder / "case.resolved.toml").read_text())
                ["grid"]["cell_size"]}
         if meta["kind"] == "multiscale":
-            phi = json.loads((ROOT / meta["phi_file"]).read_text())
-            row |= {"phi_deg": phi["phi_deg"], "phi_band95_deg": phi["phi_band95_deg"],
-                    "peak_phi_deg": phi["peak_phi_deg"],
-                    "peak_phi_band95_deg": phi["peak_phi_band95_deg"]}
+            resolved = tomllib.loads((folder / "case.resolved.toml").read_text())
+            library = next(m["library"] for m in resolved["materials"].values()
+                           if m.get("type") == "dem")
+            row |= bed_angles(meta, library)
             stag = folder / "stagnant.json"
             if stag.is_file():
                 row["carried"] = [{k: f[k] for k in ("depth_over_R", "carried_depth_axis",
@@ -177,8 +235,19 @@ def rows(data: Path, min_window: float) -> list[dict]:
                                   for f in json.loads(stag.read_text())["frames"]]
         f = fit(folder, row["phi_deg"], min_window)
         row |= {k: f[k] for k in ("K_phi", "K_phi_stderr", "p_0", "p_0_stderr", "window",
-                                  "window_rule", "steady", "ripple_rms_pct")}
+                                  "window_rule", "steady", "ripple_rms_pct", "linear",
+                                  "local_slopes", "period")}
+        for k in ("K_phi_u", "model_error", "curvature_t", "curvature_t95", "slope_change"):
+            row[k] = f.get(k)
+        row["K_phi_u"] = row["K_phi_u"] or row["K_phi_stderr"]
         row["K_kang_steady"] = k_phi(row["phi_deg"])
+        row["windows"] = []
+        for lo, hi in WINDOWS:
+            hi = min(hi, row["window"][1])
+            w = fit(folder, row["phi_deg"], 0.0, start=lo, stop=hi + 1e-9)
+            row["windows"].append({"window": [lo, hi], "K_phi": w["K_phi"],
+                                   "K_phi_u": w.get("K_phi_u") or w["K_phi_stderr"],
+                                   "linear": w["linear"]})
         if meta["kind"] == "multiscale":
             b, pb = row["phi_band95_deg"], row["peak_phi_band95_deg"]
             row["K_kang_steady_band95"] = [k_phi(row["phi_deg"] - b), k_phi(row["phi_deg"] + b)]
@@ -187,34 +256,77 @@ def rows(data: Path, min_window: float) -> list[dict]:
                                          k_phi(row["peak_phi_deg"] + pb)]
             row["follows_steady"] = abs(row["K_phi"] / row["K_kang_steady"] - 1) <= FOLLOWS
             row["follows_peak"] = abs(row["K_phi"] / row["K_kang_peak"] - 1) <= FOLLOWS
+            for w in [row, *row["windows"]]:
+                w["verdict_steady"] = verdict(w["K_phi"], w["K_phi_u"], row["K_kang_steady"])
+                w["verdict_peak"] = verdict(w["K_phi"], w["K_phi_u"], row["K_kang_peak"])
         out.append(row)
+    by_name = {r["name"]: r for r in out}
+    for r in out:  # ratios over common windows: cuboid / cylinder, multiscale / twin
+        if r["kind"] != "multiscale":
+            continue
+        for other in out:
+            if other is r or other["kind"] not in ("multiscale", "twin"):
+                continue
+            pair = None
+            if (other["kind"] == "multiscale" and r["shape"] == "cuboid"
+                    and other["shape"] == "cylinder" and other["eta_r"] == r["eta_r"]
+                    and other.get("library") == r.get("library")):
+                pair = "over_cylinder"
+            elif (other["kind"] == "twin" and other["shape"] == r["shape"]
+                  and abs(other["phi_deg"] - r["phi_recipe_deg"]) < 0.01):
+                pair = "over_twin"
+            if pair:
+                r[pair] = {"name": other["name"], **common_ratio(
+                    data / r["name"], r, data / other["name"], by_name[other["name"]])}
     if not out:
         raise SystemExit(f"{data}: no collected runs (*/meta.json); see `collect`")
     return out
 
 
 def print_table(table: list[dict]) -> None:
-    print(f"{'run':<16} {'shape':<8} {'cell':>6} {'eta_r':>5} {'phi steady':>12} {'phi peak':>12} "
-          f"{'window':>10} {'K_phi +- se':>14} {'p_0':>6} {'K/Kang st':>9} {'K/Kang pk':>9}"
-          f"  carried axis/edge, last frame [m]")
+    """The table: per run the angles of its bed's packings, K_phi +- its uncertainty with
+    the model error over the rule's window, the linearity test, the ratio to Kang's law
+    at both angles with the verdicts; then the same over each of WINDOWS; then the
+    ratios over common windows."""
+    print(f"{'run':<16} {'shape':<8} {'lib':>3} {'phi steady':>12} {'phi peak':>12} "
+          f"{'window':>10} {'K_phi +- u (se)':>22} {'t curv':>11} {'K/Kang st':>9} "
+          f"{'K/Kang pk':>9}  verdicts steady/peak")
     for r in table:
         win = f"{r['window'][0]:.2f}-{r['window'][1]:.2f}" + ("" if r["steady"] else "*")
+        curv = ("-" if r["curvature_t"] is None
+                else f"{r['curvature_t']:+.1f}/{r['curvature_t95']:.1f}")
+        k = f"{r['K_phi']:>7.2f} +- {r['K_phi_u']:<5.2f} ({r['K_phi_stderr']:.2f})"
         if r["kind"] == "twin":
-            print(f"{r['name']:<16} {r['shape']:<8} {r['cell_m']:>6.3g} {'MC':>5} "
-                  f"{r['phi_deg']:>12.2f} {'':>12} "
-                  f"{win:>10} {r['K_phi']:>7.2f} +- {r['K_phi_stderr']:<4.2f} {r['p_0']:>6.1f}"
-                  f" {r['K_phi'] / r['K_kang_steady']:>9.2f}")
+            print(f"{r['name']:<16} {r['shape']:<8} {'MC':>3} {r['phi_deg']:>12.2f} "
+                  f"{'':>12} {win:>10} {k:>22} {curv:>11} "
+                  f"{r['K_phi'] / r['K_kang_steady']:>9.2f}")
             continue
-        carried = r.get("carried", [])
-        last = (f"{carried[-1]['carried_depth_axis']:.2f}/{carried[-1]['carried_depth_edge']:.2f}"
-                if carried else "-")
-        print(f"{r['name']:<16} {r['shape']:<8} {r['cell_m']:>6.3g} {r['eta_r']:>5g} "
+        print(f"{r['name']:<16} {r['shape']:<8} {r['library']:>3} "
               f"{r['phi_deg']:>6.2f} +-{r['phi_band95_deg']:<4.2f} "
-              f"{r['peak_phi_deg']:>6.1f} +-{r['peak_phi_band95_deg']:<4.1f} {win:>10} "
-              f"{r['K_phi']:>7.2f} +- {r['K_phi_stderr']:<4.2f} {r['p_0']:>6.1f} "
-              f"{r['K_phi'] / r['K_kang_steady']:>9.2f} {r['K_phi'] / r['K_kang_peak']:>9.2f}"
-              f"  {last}")
-    print("*: the rule's window is shorter than --min-window (not a steady slope)")
+              f"{r['peak_phi_deg']:>6.2f} +-{r['peak_phi_band95_deg']:<4.2f} {win:>10} "
+              f"{k:>22} {curv:>11} {r['K_phi'] / r['K_kang_steady']:>9.2f} "
+              f"{r['K_phi'] / r['K_kang_peak']:>9.2f}  {r['verdict_steady']}/"
+              f"{r['verdict_peak']}")
+    print("*: not a steady slope (window shorter than --min-window, curved by the linearity "
+          "test, or the rule's fallback); u: the slope's uncertainty with the model error")
+    for lo, hi in WINDOWS:
+        print(f"\nover d/R {lo:g}-{hi:g} (or to the run's end):")
+        for r in table:
+            w = next(w for w in r["windows"] if w["window"][0] == lo)
+            text = (f"  {r['name']:<16} {w['window'][0]:.2f}-{w['window'][1]:.2f} "
+                    f"K {w['K_phi']:7.2f} +- {w['K_phi_u']:<6.2f} linear {w['linear']}")
+            if r["kind"] == "multiscale":
+                text += (f"  K/Kang {w['K_phi'] / r['K_kang_steady']:.2f} / "
+                         f"{w['K_phi'] / r['K_kang_peak']:.2f}  {w['verdict_steady']}/"
+                         f"{w['verdict_peak']}")
+            print(text)
+    print("\nratios over common windows:")
+    for r in table:
+        for key in ("over_cylinder", "over_twin"):
+            if key in r:
+                c = r[key]
+                print(f"  {r['name']} / {c['name']}: {c['ratio']:.3f} +- {c['ratio_u']:.3f} "
+                      f"over d/R {c['window'][0]:.2f}-{c['window'][1]:.2f}")
 
 
 def figure(table: list[dict], data: Path, png: Path) -> None:
