@@ -419,6 +419,47 @@ def test_adaptive_updates_are_rank_thread_independent_and_resume_bitwise(rve_cas
     assert interrupted_history(path, out, first=3, steps=9, then=2) == history
 
 
+@pytest.mark.validation  # 30 s; a serial resume with sleeping RVEs is in the fast tier
+def test_sleeping_rves_are_rank_thread_independent_and_resume_bitwise(tmp_path):
+    """The reduced column (small_column: geostatic stage, release, retiling, rebalancing
+    every 7 steps) with sleeping RVEs (tolerance 1e-5, at most 5 steps asleep): one
+    history.csv, to the byte, with its cost columns, on 1 rank with 1 and 2 threads, on 2
+    ranks, and on 3 ranks stopped at step 47 (RVEs asleep in the checkpoint) and resumed
+    on 2; some RVEs slept."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_sleeping import sleeping_column
+
+    path = sleeping_column(tmp_path)
+    ref = tmp_path / "serial"
+    assert main(["run", str(path), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
+    history = (ref / "history.csv").read_text()
+    rows = [r.split(",") for r in history.splitlines() if r[:1].isdigit()]
+    assert float(rows[-1][-1]) < 0.97 * int(rows[-1][0])  # updates_per_rve: some slept
+
+    def fresh(name):
+        out = tmp_path / name
+        shutil.copytree(ref / "packings", out / "packings")
+        return out
+
+    out = fresh("threads2")
+    r = subprocess.run([sys.executable, "-m", "grainscale", "run", str(path), "--out",
+                        str(out), "--quiet", "--threads", "2"], capture_output=True, text=True,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "2"}, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 threads differ"
+    out = fresh("ranks2")
+    r = mpirun(2, ["run", str(path), "--out", str(out), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 ranks differ"
+    out = fresh("ranks3")
+    common = ["run", str(path), "--out", str(out), "--quiet", "--checkpoint-every", "10"]
+    r = mpirun(3, [*common, "--max-steps", "47"])
+    assert r.returncode == 0, r.stderr
+    r = mpirun(2, [*common, "--resume"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "3 ranks resumed on 2 differ"
+
+
 @pytest.mark.validation
 def test_rolling_resistance_across_ranks_retiling_and_restart(rve_case, tmp_path):
     """RVEs with rolling resistance (alpha_r = 1, eta_r = 0.2: a 6-component contact
