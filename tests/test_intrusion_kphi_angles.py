@@ -39,6 +39,29 @@ def test_noslip_cuboid_differs_only_in_its_intruder():
     assert box == cyl
 
 
+def test_noslip_fine_differs_only_in_grid_bed_and_depth():
+    """noslip_fine.toml is noslip.toml on a graded grid of 6 cells over R near the
+    intruder, in a 3 m quarter of a 3 m bed, to d/R 3: the intruder's base and the
+    probes keep their depth below the surface (the probes within the same fine cell),
+    everything else is the same."""
+    fine = _physics(gs.load_case(HERE / "noslip_fine.toml"))
+    base = _physics(gs.load_case(HERE / "noslip.toml"))
+    for a in "xyz":
+        assert fine["grid"][f"nodes_{a}"]["cell"] == pytest.approx(0.5 / 6)
+    assert fine["bodies"][0]["hi"] == [3.0, 3.0, 3.0]
+    assert fine["rigid"]["center"] == [0.0, 0.0, 3.0] and base["rigid"]["center"][2] == 2.0
+    assert fine["time"]["end"] == pytest.approx(0.1 + 1.5 / 0.25)  # d = 1.5 m = 3 R
+    for a, b in zip(fine["output"]["probes"], base["output"]["probes"], strict=True):
+        assert a["position"][2] - 3.0 == pytest.approx(b["position"][2] - 2.0)
+    for d in (fine, base):
+        for key in ("grid", "time"):
+            d.pop(key)
+        d["bodies"][0].pop("hi")
+        d["rigid"].pop("center")
+        d["output"].pop("probes")
+    assert fine == base
+
+
 def test_angle_case_sets_the_rolling_resistance():
     plain = kphi.angle_case(0.0).check()
     assert plain.rve.rolling_stiffness == 0.0 and plain.rve.rolling_friction == 0.0

@@ -1,8 +1,8 @@
 """K_phi against the friction angle: the no-slip intrusion (examples/intrusion/noslip.toml)
 at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, Fig. 14).
 
-    python studies/intrusion/kphi_angles.py run ETA_R --out DIR [--shape cuboid]
-        [--library N] [--threads N]
+    python studies/intrusion/kphi_angles.py run ETA_R --out DIR [--shape cuboid |
+        --case examples/intrusion/noslip_fine.toml] [--library N] [--threads N]
     python studies/intrusion/kphi_angles.py collect DIR --name NAME (--eta-r ETA_R |
         --twin-phi PHI) [--partial] [--data studies/intrusion/data/noslip]
     python studies/intrusion/kphi_angles.py table [--data studies/intrusion/data/noslip]
@@ -11,7 +11,8 @@ at several RVE friction angles, set by the rolling resistance (seed Eq. 27-29, F
 `run`: noslip.toml (or noslip_cuboid.toml) with [rve] rolling_stiffness = 1 and
 rolling_friction = ETA_R (0: no rolling resistance, the plain RVE), run into DIR, resumed
 from its newest checkpoint where DIR holds one (a stopped run goes on where it stopped).
-`--library N` draws the bed from packings 0 .. N-1 of the recipe (the case's 2 by
+`--case` runs another no-slip case (noslip_fine.toml: 6 cells over R, a 3 m quarter,
+to d/R 3). `--library N` draws the bed from packings 0 .. N-1 of the recipe (the case's 2 by
 default): with 8 they are exactly the packings whose angles PHI_FILES quote, so the bed
 is made of the material whose angle is measured.
 The angle each ETA_R gives is measured on the same [rve] table (noslip.toml's [rve] and
@@ -97,13 +98,14 @@ def phi_file(eta_r: float) -> Path:
     return ROOT / "studies" / "rolling" / "data" / name
 
 
-def angle_case(eta_r: float, shape: str = "cylinder", library: int | None = None
-               ) -> gs.Case:
-    """noslip.toml (or noslip_cuboid.toml) with rolling resistance eta_r at alpha_r = 1
-    (none at eta_r = 0), its bed drawn from `library` packings (None: the case's)."""
+def angle_case(eta_r: float, shape: str = "cylinder", library: int | None = None,
+               path: Path | None = None) -> gs.Case:
+    """noslip.toml (or noslip_cuboid.toml, or the case at `path`) with rolling resistance
+    eta_r at alpha_r = 1 (none at eta_r = 0), its bed drawn from `library` packings (None:
+    the case's)."""
     if not 0.0 <= eta_r <= 1.0:
         raise SystemExit(f"ETA_R {eta_r}: valid 0 to 1")
-    case = gs.load_case(SHAPES[shape])
+    case = gs.load_case(path if path is not None else SHAPES[shape])
     if library is not None:
         case.materials["sand"].library = library
         case.title += f", a bed of {library} packings"
@@ -116,8 +118,8 @@ def angle_case(eta_r: float, shape: str = "cylinder", library: int | None = None
 
 
 def run(eta_r: float, shape: str, out: Path, threads: int | None,
-        library: int | None = None) -> None:
-    case = angle_case(eta_r, shape, library).check()
+        library: int | None = None, path: Path | None = None) -> None:
+    case = angle_case(eta_r, shape, library, path).check()
     resume = any((out / name).is_file() for name in ("checkpoint.h5", "checkpoint.prev.h5"))
     gs.run(case, out, resume=resume, threads=threads)
 
@@ -220,9 +222,9 @@ def rows(data: Path, min_window: float) -> list[dict]:
     for meta_file in sorted(data.glob("*/meta.json")):
         meta = json.loads(meta_file.read_text())
         folder = meta_file.parent
-        row = {"name": folder.name, **meta,
-               "cell_m": tomllib.loads((folder / "case.resolved.toml").read_text())
-               ["grid"]["cell_size"]}
+        grid = tomllib.loads((folder / "case.resolved.toml").read_text())["grid"]
+        row = {"name": folder.name, **meta,  # a graded grid: its fine cells
+               "cell_m": grid.get("cell_size") or grid["nodes_z"]["cell"]}
         if meta["kind"] == "multiscale":
             resolved = tomllib.loads((folder / "case.resolved.toml").read_text())
             library = next(m["library"] for m in resolved["materials"].values()
@@ -389,6 +391,7 @@ def main() -> None:
     r.add_argument("eta_r", type=float)
     r.add_argument("--out", type=Path, required=True)
     r.add_argument("--shape", choices=sorted(SHAPES), default="cylinder")
+    r.add_argument("--case", type=Path, help="another no-slip case (default: by --shape)")
     r.add_argument("--threads", type=int)
     r.add_argument("--library", type=int,
                    help="packings the bed is drawn from (default: the case's 2)")
@@ -408,7 +411,7 @@ def main() -> None:
                    help="d/R: the shortest window that counts as a steady slope")
     args = ap.parse_args()
     if args.cmd == "run":
-        run(args.eta_r, args.shape, args.out, args.threads, args.library)
+        run(args.eta_r, args.shape, args.out, args.threads, args.library, args.case)
     elif args.cmd == "collect":
         if args.eta_r is not None:
             phi_file(args.eta_r)  # refused before anything is copied
