@@ -253,7 +253,9 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
         For an invalid case or option, before any computation.
     RunError
         If a simulation error stops the run (the checkpoints stay: run again with
-        ``resume=True``).
+        ``resume=True``). A signal (Ctrl-C, SIGTERM, SIGUSR1) is no error: the run stops
+        at the next step with a checkpoint and returns what it wrote (continue with
+        ``resume=True``); a second Ctrl-C raises KeyboardInterrupt at once.
     TypeError
         If `case` is neither a Case nor a path.
 
@@ -267,6 +269,7 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
     >>> r.history["kinetic_energy"][-1]
     """
     from grainscale.coupling.driver import run_loaded_case
+    from grainscale.coupling.stops import EXIT_STOPPED
 
     if isinstance(case, (str, Path)):
         case = load_case(case)
@@ -280,7 +283,7 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
                            checkpoint_every=checkpoint_every, resume=resume,
                            allow_changed=allow_changed, progress=progress,
                            threads=threads, device=device, on_step=on_step)
-    if code != 0:
+    if code not in (0, EXIT_STOPPED):  # a stop by a signal returns what was written
         raise RunError(f"the run into {out} stopped with a simulation error (above); its "
                        "last checkpoint is kept: run again with resume=True")
     return Result(out)

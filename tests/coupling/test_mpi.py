@@ -71,9 +71,11 @@ history = ["time", "kinetic_energy", "p", "q", "volumetric_strain"]
 """
 
 
-def mpirun(n: int, args: list[str], timeout: float = 300, script: Path | None = None):
-    """`mpiexec -n n python -m grainscale ARGS` (or python SCRIPT ARGS); CompletedProcess."""
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+def mpirun(n: int, args: list[str], timeout: float = 300, script: Path | None = None,
+           env: dict[str, str] | None = None):
+    """`mpiexec -n n python -m grainscale ARGS` (or python SCRIPT ARGS), with `env` added
+    to the environment; CompletedProcess."""
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1", **(env or {})}
     target = [str(script)] if script else ["-m", "grainscale"]
     return subprocess.run([MPIEXEC, "-n", str(n), sys.executable, *target, *args], env=env,
                           capture_output=True, text=True, timeout=timeout)

@@ -153,4 +153,9 @@ def main(argv: list[str] | None = None) -> int:
         if root:
             print(f"grainscale: error: file not found: {err.filename or err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # a second Ctrl-C (the first stops at the next step)
+        if root:
+            print("grainscale: interrupted at once; the last checkpoint written is intact: "
+                  "continue with --resume", file=sys.stderr)
+        return 130
     return 1

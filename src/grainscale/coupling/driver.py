@@ -42,6 +42,8 @@ from grainscale.coupling.outputs import gather, history_values, point_fields
 from grainscale.coupling.probes import Probe, ProbeWriter, resolve
 from grainscale.coupling.rebalance import rebalance
 from grainscale.coupling.rve_material import RVEMaterial
+from grainscale.coupling.stops import EXIT_STOPPED, StopRequests
+from grainscale.coupling.stops import name as signal_name
 from grainscale.dem.engine import check_device
 from grainscale.distributed.comm import Comm, world
 from grainscale.io import faults
@@ -186,7 +188,8 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
                     on_step: Callable[[MPMState], None] | None = None) -> int:
     """Run a validated case (paths in it relative to the folder of the file it was loaded
     from, else the working folder); returns the exit code (0 done, 1 stopped by a
-    simulation error). The CLI and grainscale.run both end here.
+    simulation error, 3 stopped by a signal with a checkpoint: coupling/stops.py). The
+    CLI and grainscale.run both end here.
 
     max_steps ends the run at that step of the whole run (counted from time.start, as
     time.end is a time of the whole run), so the same command given again with
@@ -405,6 +408,8 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     step_comm = step_wait = 0.0  # inside the steps (not outputs', checkpoints')
     run_start = wallclock.perf_counter()
     step_seconds = 0.0
+    stopped = 0  # the signal that stopped the run (coupling/stops.py), 0: none
+    stops = StopRequests().__enter__()
     faults.point("run.start")
     try:
         while True:
@@ -425,6 +430,9 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
             if (s.time >= t_end - 1e-12 * (t_end - t0)
                     or (max_steps is not None and s.step >= max_steps)
                     or (steps_this_run is not None and steps_run >= steps_this_run)):
+                break
+            stopped = stops.requested(comm)  # collective: every rank stops here alike
+            if stopped:
                 break
             t_step = wallclock.perf_counter()
             c0, w0 = comm.comm_seconds, comm.wait_seconds
@@ -452,13 +460,14 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
                            "imbalance_after_last": moved["after"]}
                 faults.point("step.rebalanced")
             bar.update(dt, s.step)
-        if every and saved_step != s.step:  # before the final row: a resume drops it
-            save()
+        if (every or stopped) and saved_step != s.step:  # before the final row: a resume
+            save()  # drops it
     except SimulationError as err:
         if not isinstance(err, RemoteFailure):  # the rank that failed reports the cause
             print(f"grainscale: error: {err}", file=sys.stderr)
         code = 1
     finally:
+        stops.__exit__()
         bar.close()
     if code == 0 and last_row_step != s.step:
         write_row()  # final row (unscheduled)
@@ -473,4 +482,9 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
             (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
             if progress:
                 print(format_cost(report), file=sys.stderr)
+    if stopped and code == 0:
+        if root:
+            print(f"grainscale: stopped at step {s.step} ({signal_name(stopped)}); the "
+                  f"checkpoint in {out} holds it: continue with --resume", file=sys.stderr)
+        return EXIT_STOPPED
     return code

@@ -3,6 +3,8 @@
     GRAINSCALE_KILL_AT="NAME:N"      SIGKILL the Nth time (N >= 1) this process reaches
                                      point NAME (every MPI rank that gets there)
     GRAINSCALE_KILL_AT="NAME:N@R"    ... on MPI rank R only
+    GRAINSCALE_KILL_AT="NAME:N/SIG"  ... another signal instead (TERM, INT, USR1, ...: a
+                                     graceful stop's, tests/test_graceful_stop.py)
 
 The variable is read once, when this module is first imported; `arm()` sets or clears
 the target in a running process. Unset (every normal run), `point()` returns at once.
@@ -65,24 +67,28 @@ ARMED = False  # a target is set: callers may skip work done only to expose a po
 _name: str | None = None
 _count = 0  # hits left before the kill
 _rank: int | None = None
+_signal = signal.SIGKILL
 
 
 def arm(spec: str | None) -> None:
-    """Set the target from a "NAME:N" or "NAME:N@R" spec (None or "" clears it)."""
-    global ARMED, _name, _count, _rank
-    ARMED, _name, _count, _rank = False, None, 0, None
+    """Set the target from a "NAME:N[@R][/SIG]" spec (None or "" clears it)."""
+    global ARMED, _name, _count, _rank, _signal
+    ARMED, _name, _count, _rank, _signal = False, None, 0, None, signal.SIGKILL
     if not spec:
         return
     try:
-        name, _, rest = spec.rpartition(":")
+        spec_only, _, sig = spec.partition("/")
+        name, _, rest = spec_only.rpartition(":")
         n, at, rank = rest.partition("@")
         count, rank_n = int(n), int(rank) if at else None
-    except ValueError:
+        sig_n = signal.Signals[f"SIG{sig}"] if sig else signal.SIGKILL
+    except (ValueError, KeyError):
         count = rank_n = name = None
     if name not in POINTS or count is None or count < 1:
-        raise ValueError(f"{ENV}={spec!r}: expected NAME:N or NAME:N@RANK with N >= 1 and "
-                         f"NAME one of {', '.join(POINTS)}")
-    ARMED, _name, _count, _rank = True, name, count, rank_n
+        raise ValueError(f"{ENV}={spec!r}: expected NAME:N or NAME:N@RANK with N >= 1, "
+                         f"optionally /SIG (TERM, INT, ...), and NAME one of "
+                         f"{', '.join(POINTS)}")
+    ARMED, _name, _count, _rank, _signal = True, name, count, rank_n, sig_n
 
 
 def _my_rank() -> int:
@@ -91,7 +97,8 @@ def _my_rank() -> int:
 
 
 def point(name: str) -> None:
-    """SIGKILL this process if it is the target's Nth arrival at `name`."""
+    """Signal this process (SIGKILL unless the spec names another) if it is the
+    target's Nth arrival at `name`."""
     global _count
     if name != _name:  # always so when unarmed
         return
@@ -99,7 +106,7 @@ def point(name: str) -> None:
         return
     _count -= 1
     if _count == 0:
-        os.kill(os.getpid(), signal.SIGKILL)
+        os.kill(os.getpid(), _signal)
 
 
 arm(os.environ.get(ENV))
