@@ -148,11 +148,12 @@ def table(rows: list[dict], weak: bool) -> None:
     print(head)
     for r in rows:
         t = r["seconds_per_step"]
+        kb = r["this_invocation"]["reduced_bytes_per_rank_per_step"] / 1e3
         print(f"{r['ranks']:>5} {r['threads']:>3} {r['points']:>6} {step_seconds(r) * 1e3:9.2f} "
               f"{t['mpm'] * 1e3:7.2f} {t['dem'] * 1e3:8.2f} {t['comm'] * 1e3:6.3f} "
               f"{t['wait'] * 1e3:6.2f} {t['other'] * 1e3:6.2f} "
               f"{100 * t['comm'] / step_seconds(r):6.2f} "
-              f"{r['reduced_bytes_per_rank_per_step'] / 1e3:7.1f} {r['speedup']:8.3f} "
+              f"{kb:7.1f} {r['speedup']:8.3f} "
               f"{r['efficiency']:5.3f} {r['bound']:6.3f}")
 
 

@@ -36,12 +36,11 @@ import numpy as np
 
 from grainscale.config.base import ConfigError, resolved_toml
 from grainscale.config.case import Case, load_case
-from grainscale.coupling import checkpoints
+from grainscale.coupling import checkpoints, cost
 from grainscale.coupling import materials as dem_materials
 from grainscale.coupling.outputs import gather, history_values, point_fields
 from grainscale.coupling.probes import Probe, ProbeWriter, resolve
 from grainscale.coupling.rebalance import rebalance
-from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.coupling.stops import EXIT_STOPPED, StopRequests
 from grainscale.coupling.stops import name as signal_name
 from grainscale.dem.engine import check_device
@@ -53,74 +52,6 @@ from grainscale.io.vtk import PVDSeries, write_grid_vtr, write_points_vtu
 from grainscale.mpm.materials import KINDS
 from grainscale.mpm.setup import build_state
 from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError, step
-
-
-# --------------------------------------------------------------------------- cost
-def cost_report(s: MPMState, steps: int, step_seconds: float, wall_seconds: float,
-                comm_seconds: float = 0.0, wait_seconds: float = 0.0) -> dict:
-    """Time per step split into MPM, DEM, communication, waiting and everything else
-    (outputs, checkpoints), averaged over ranks, and the core-time one RVE costs per step
-    (DEM wall time x threads / RVEs / steps). comm_seconds and wait_seconds are those
-    spent inside the steps. Collective: the result is on rank 0."""
-    dem = sum(m.seconds for m in s.materials if isinstance(m, RVEMaterial))
-    n_rve = sum(m.n_rve for m in s.materials if isinstance(m, RVEMaterial))
-    dem_steps = sum(m.rve_steps for m in s.materials if isinstance(m, RVEMaterial))
-    updates = sum(m.rve_updates for m in s.materials if isinstance(m, RVEMaterial))
-    particle_steps = sum(m.particle_steps for m in s.materials if isinstance(m, RVEMaterial))
-    c = s.comm
-    mine = {"dem": dem, "comm": comm_seconds, "wait": wait_seconds,
-            "mpm": step_seconds - dem - comm_seconds - wait_seconds,
-            "other": wall_seconds - step_seconds, "rves": n_rve, "dem_steps": dem_steps,
-            "rve_updates": updates, "particle_steps": particle_steps,
-            "reduced_bytes": c.bytes_reduced}
-    ranks = c.gather(mine)
-    if ranks is None:
-        return {}
-    threads = numba.get_num_threads()
-    mean = {k: float(np.mean([r[k] for r in ranks])) / steps
-            for k in ("mpm", "dem", "comm", "wait", "other")}
-    report = {
-        "steps": steps, "points": int(s.n_global), "rves": int(sum(r["rves"] for r in ranks)),
-        "ranks": c.size, "threads": threads, "wall_seconds": wall_seconds,
-        "seconds_per_step": {**mean, "total": wall_seconds / steps},
-        "dem_seconds_per_step_max_rank": max(r["dem"] for r in ranks) / steps,
-        "reduced_bytes_per_rank_per_step": float(np.mean([r["reduced_bytes"] for r in ranks]))
-        / steps,
-    }
-    if report["rves"]:
-        dem_all = sum(r["dem"] for r in ranks)
-        report["core_seconds_per_rve_per_step"] = dem_all * threads / (report["rves"] * steps)
-        report["dem_steps_per_rve_per_step"] = (sum(r["dem_steps"] for r in ranks)
-                                                / (report["rves"] * steps))
-        # adaptive updates step only some RVEs each MPM step (1.0 without them)
-        report["fraction_of_rves_stepped"] = (sum(r["rve_updates"] for r in ranks)
-                                              / (report["rves"] * steps))
-        # core-time per DEM particle-step, of the DEM batches and of everything
-        # (the kernel's own figure, benchmarks/dem_update_cost.py, is their floor)
-        work = sum(r["particle_steps"] for r in ranks)
-        report["particle_steps"] = work
-        if work:
-            report["core_ns_per_particle_step"] = {
-                "dem": 1e9 * dem_all * threads / work,
-                "all_in": 1e9 * wall_seconds * threads * c.size / work}
-    return report
-
-
-def format_cost(r: dict) -> str:
-    t = r["seconds_per_step"]
-    text = (f"cost per step: total {t['total'] * 1e3:.3g} ms = MPM {t['mpm'] * 1e3:.3g} ms + "
-            f"DEM {t['dem'] * 1e3:.3g} ms + communication {t['comm'] * 1e3:.3g} ms + waiting "
-            f"{t['wait'] * 1e3:.3g} ms + other {t['other'] * 1e3:.3g} ms ({r['steps']} steps, "
-            f"{r['ranks']} rank(s) x {r['threads']} thread(s))")
-    if "core_seconds_per_rve_per_step" in r:
-        text += (f"; {r['rves']} RVEs: {r['core_seconds_per_rve_per_step'] * 1e3:.3g} "
-                 f"core-ms per RVE per step ({r['dem_steps_per_rve_per_step']:.3g} DEM steps, "
-                 f"{100 * r['fraction_of_rves_stepped']:.3g} % of the RVEs stepped)")
-    if "core_ns_per_particle_step" in r:
-        ns = r["core_ns_per_particle_step"]
-        text += (f"; {ns['all_in']:.3g} core-ns per particle-step all in "
-                 f"({ns['dem']:.3g} in the DEM)")
-    return text
 
 
 # --------------------------------------------------------------------------- run
@@ -386,12 +317,25 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
                 **written}
 
     previous = found.manifest if resume else None  # this run's last valid checkpoint
+    # the cost totals of the run up to the checkpoint resumed from (None: a checkpoint
+    # written before they were kept)
+    cost_before = None
+    if resume and all(f"cost_{k}" in c for k in cost.KEYS):
+        cost_before = {k: float(c[f"cost_{k}"]) for k in cost.KEYS}
+
+    def cost_now() -> dict | None:
+        """This invocation's cost totals so far (collective; rank 0 gets them)."""
+        return cost.totals(s, steps_run + failed, step_seconds,
+                           wallclock.perf_counter() - run_start, step_comm, step_wait)
 
     def save() -> None:
         nonlocal previous, saved_step
         if root:
             history.sync()  # on disk before the checkpoint counts its rows
-        checkpoints.save(out, s, counters(), record, previous)
+        now = cost_now()  # the run's cost so far travels with the checkpoint
+        totals = {} if now is None else {f"cost_{k}": v for k, v in
+                                         cost.add(cost_before, now).items()}
+        checkpoints.save(out, s, counters() | totals, record, previous)
         previous, saved_step = out / checkpoints.MANIFEST, s.step
 
     def due(n_done: int, interval: float) -> bool:
@@ -409,6 +353,8 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     run_start = wallclock.perf_counter()
     step_seconds = 0.0
     stopped = 0  # the signal that stopped the run (coupling/stops.py), 0: none
+    failed = 0  # 1: a step failed (its time and work count in the cost report)
+    t_step = run_start
     stops = StopRequests().__enter__()
     faults.point("run.start")
     try:
@@ -466,6 +412,8 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
         if not isinstance(err, RemoteFailure):  # the rank that failed reports the cause
             print(f"grainscale: error: {err}", file=sys.stderr)
         code = 1
+        failed = 1
+        step_seconds += wallclock.perf_counter() - t_step
     finally:
         stops.__exit__()
         bar.close()
@@ -474,14 +422,14 @@ def _run(case: Case, record: dict, case_dir: Path, out: Path, comm: Comm, max_st
     if root:
         history.close()
     faults.point("run.end")
-    if steps_run:
-        report = cost_report(s, steps_run, step_seconds, wallclock.perf_counter() - run_start,
-                             step_comm, step_wait)
-        report.update(balance if balance_every else {})
+    if steps_run + failed:
+        now = cost_now()
         if root:
+            extra = {**(balance if balance_every else {}), "resumed": resume}
+            report = cost.cost_json(now, cost_before, bool(failed), extra)
             (out / "cost.json").write_text(json.dumps(report, indent=2) + "\n")
             if progress:
-                print(format_cost(report), file=sys.stderr)
+                print(cost.format_cost(report), file=sys.stderr)
     if stopped and code == 0:
         if root:
             print(f"grainscale: stopped at step {s.step} ({signal_name(stopped)}); the "
