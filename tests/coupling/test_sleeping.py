@@ -151,6 +151,35 @@ def test_an_rve_whose_grains_are_not_at_rest_never_sleeps(packing):
     assert m.deferred[0] == 0 and m.deferred[2] > 0
 
 
+def test_a_loose_rve_sleeps_and_wakes_at_the_rate_its_collisions_allow(packing):
+    """Point 1's cell is stretched 1 % in every direction in one step: its contacts open
+    and its stress falls below LOOSE p_prep (its grains keep their fluctuating motion,
+    so by the loaded criteria it would not be at rest). It sleeps all the same, and
+    wakes at max_deferred_steps owing its increments, over the time that keeps its
+    collisional stress rho_s d^2 (max|H| / T)^2 below LOOSE p_prep: here one MPM step's
+    DEM steps; the cell ends at prod(I + dH) h0."""
+    m = material(packing, update_tolerance=1e-5, max_deferred_steps=4)
+    s = m.initial_stress()
+    dH = np.zeros((3, 3, 3))
+    dH[1] = 0.01 * np.eye(3)
+    m.update(dH, DT, s)
+    b = m.batch
+    assert np.abs(b.stress[1]).max() <= rve_material.LOOSE * m.params.preparation.pressure
+    assert m._loose(b)[1] and not m._loose(b)[0]
+    h0 = b.h[1].copy()
+    n = max(1, math.ceil(DT / m.dt_crit - 1e-9))
+    small = np.full((3, 3, 3), 2e-6)  # below the tolerance in 4 steps: 8e-6
+    total = np.eye(3)
+    for k in range(4):
+        before = m.dem_steps[1]
+        total = (np.eye(3) + small[1]) @ total
+        m.update(small, DT, s)
+        if k < 3:
+            assert m.deferred[1] == k + 1 and m.dem_steps[1] == before
+    assert m.deferred[1] == 0 and m.dem_steps[1] - before == n  # woke: one step's worth
+    np.testing.assert_allclose(m.batch.h[1], total @ h0, rtol=0, atol=1e-13 * np.abs(h0).max())
+
+
 def test_a_tolerance_no_increment_falls_below_is_bitwise_every_step(packing):
     """Dynamic RVEs with a tolerance of 1e-300 step every RVE every MPM step with the
     stress, DEM steps and point fields of update_tolerance = 0, to the bit."""

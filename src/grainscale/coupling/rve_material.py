@@ -96,9 +96,16 @@ CHUNK_BYTES = 256 * 2**20  # a checkpoint gathers a device-built batch this much
 # stress is then below 2e-5 p).
 QUIET_UNBALANCED = 0.05
 QUIET_INERTIAL = 0.01
+# ... or it is loose: every stress component at most LOOSE times the recipe's preparation
+# pressure (the material's stress scale). A loose cell (no load-bearing network, its
+# porosity above the jammed one) carries next to no stress, and needs a finite compression
+# before it carries any: over strains below the tolerance, none.
+LOOSE = 0.01
 # a waking RVE takes what it owes over at least the time that keeps its inertial number
 # max|H_acc| d sqrt(rho_s / p) / T at or below this (the rate-independent regime), at
-# most the time it slept (its macroscopic rate), at least one MPM step's
+# most the time it slept (its macroscopic rate), at least one MPM step's; a loose one
+# over the time that keeps its collisional (Bagnold) stress rho_s d^2 (max|H_acc| / T)^2
+# below LOOSE p_prep: inertial number 1 with p = LOOSE p_prep
 WAKE_INERTIAL = 1e-3
 
 
@@ -454,19 +461,29 @@ class RVEMaterial:
         quiet = ((p > 0) & (batch.unbalanced <= QUIET_UNBALANCED)
                  & (batch.unbalanced * p <= m_k * self.update_tolerance))
         i_v = np.sqrt(2.0 * batch.kinetic * self.params.density / (mass * np.where(quiet, p, 1.0)))
-        return quiet & (i_v <= QUIET_INERTIAL)
+        return (quiet & (i_v <= QUIET_INERTIAL)) | self._loose(batch)
+
+    def _loose(self, batch: RVEBatch) -> np.ndarray:
+        """(R,) the RVEs of a group whose every stress component is at most LOOSE times
+        the recipe's preparation pressure (the comment at LOOSE)."""
+        scale = LOOSE * self.params.preparation.pressure
+        return np.abs(batch.stress).max(axis=(1, 2)) <= scale
 
     def _waking_steps(self, batch: RVEBatch, rows: np.ndarray, woke: np.ndarray, n: int,
                       dt_dem: float) -> np.ndarray:
         """DEM steps of dt_dem over which the dynamic RVEs `woke` of a group (which slept:
-        quiet, so under compression) take what they owe: T = max(dt, min(t_acc,
-        max|H_acc| d sqrt(rho_s / p) / WAKE_INERTIAL)) (`update`), d the mean grain
-        diameter, p the RVE's mean stress at its last update; n is one MPM step's."""
+        at rest or loose) take what they owe: T = max(dt, min(t_acc, max|H_acc| d
+        sqrt(rho_s / p) / I)) (`update`), d the mean grain diameter, p the RVE's mean
+        stress at its last update and I = WAKE_INERTIAL, or for a loose RVE p = LOOSE
+        p_prep and I = 1 (the comment at WAKE_INERTIAL); n is one MPM step's."""
         owed = np.abs(self.H_acc[rows[woke]]).max(axis=(1, 2))
         p = -np.trace(batch.stress[woke], axis1=1, axis2=2) / 3.0
         d = 2.0 * self._constant(batch, "mean_radius")[woke]
+        loose = self._loose(batch)[woke]
+        p = np.where(loose, LOOSE * self.params.preparation.pressure, p)
+        limit = np.where(loose, 1.0, WAKE_INERTIAL)
         t_rate = np.where(p > 0, owed * d * np.sqrt(self.params.density / np.where(
-            p > 0, p, 1.0)) / WAKE_INERTIAL, np.inf)
+            p > 0, p, 1.0)) / limit, np.inf)
         t_slept = self.t_acc[rows[woke]]
         steps = np.ceil(np.minimum(t_rate, t_slept) / dt_dem - 1e-9)
         return np.maximum(steps, n).astype(np.int64)
