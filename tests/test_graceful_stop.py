@@ -35,7 +35,8 @@ def fresh(ref: Path, out: Path) -> Path:
     return out
 
 
-@pytest.mark.parametrize("sig", ["TERM", "INT", "USR1"])
+@pytest.mark.parametrize("sig", ["TERM", pytest.param("INT", marks=pytest.mark.validation),
+                                 pytest.param("USR1", marks=pytest.mark.validation)])
 def test_a_signal_stops_at_the_next_step_with_a_checkpoint(column, tmp_path, capsys, sig):
     """The signal arrives during step 31 (after its MPM and DEM work): the run stops at
     the top of the next step, writes a checkpoint there although none is due (the case
@@ -77,6 +78,7 @@ def test_a_second_ctrl_c_stops_at_once(column, tmp_path):
     assert (r.out / "history.csv").read_text() == history
 
 
+@pytest.mark.validation  # 2 MPI jobs
 @pytest.mark.skipif(MPIEXEC is None, reason="no mpiexec")
 def test_ranks_stop_together_when_one_is_signalled(column, tmp_path):
     """On 2 ranks, SIGTERM reaches rank 1 only (as a scheduler's signal may reach the

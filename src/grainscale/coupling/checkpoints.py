@@ -110,14 +110,15 @@ def save(out: Path, s: MPMState, counters: dict[str, int], case: dict,
         write_checkpoint(folder / f"rank_{s.comm.rank:05d}.h5", rank_state(s),
                          {"step": s.step}, fault="checkpoint.part")
     except OSError as err:
-        error = f"writing checkpoint part {folder}: {err}"
+        shutil.rmtree(folder, ignore_errors=True)  # no manifest names it
+        error = f"{err} (a checkpoint part){_intact(out, previous)}"
     _stop_if_any(s.comm, error)
     faults.point("checkpoint.parts_written")
     if s.comm.root:
         try:
             _commit(out, s, folder, counters, case, previous)
         except OSError as err:
-            error = f"writing checkpoint {out / MANIFEST}: {err}"
+            error = f"{err} (a checkpoint manifest){_intact(out, previous)}"
     _stop_if_any(s.comm, error)
     s.comm.barrier()  # no rank runs ahead into a new part while rank 0 cleans up
     faults.point("checkpoint.done")
@@ -131,6 +132,14 @@ def discard(out: Path) -> None:
     for name in (PREVIOUS, MANIFEST):
         (out / name).unlink(missing_ok=True)
     shutil.rmtree(out / PARTS, ignore_errors=True)
+
+
+def _intact(out: Path, previous: Path | None) -> str:
+    """What a failed checkpoint leaves to resume from, for its message."""
+    if previous is None or not previous.is_file():
+        return f"; no checkpoint in {out} yet: run again once the cause is removed"
+    return (f"; the last checkpoint in {out} is intact: continue with --resume once the "
+            "cause is removed")
 
 
 def _stop_if_any(comm, error: str | None) -> None:

@@ -162,8 +162,11 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
         raise  # raised by every rank (see above): printed once by rank 0
     except OSError as err:  # disk full, folder not writable: every file is written
         # atomically or cut back on resume, so the last checkpoint stays valid
-        print(f"grainscale: error: {err} (rank {comm.rank}); the last checkpoint in {out} "
-              "is intact: continue with --resume once the cause is removed", file=sys.stderr)
+        what = (f"the last checkpoint in {out} is intact: continue with --resume"
+                if (out / checkpoints.MANIFEST).is_file() else
+                f"no checkpoint in {out} yet: run again")
+        print(f"grainscale: error: {err} (rank {comm.rank}); {what} once the cause is "
+              "removed", file=sys.stderr)
         if comm.size > 1:  # the other ranks would wait for this one forever
             comm.abort(1)
             os._exit(1)

@@ -47,7 +47,11 @@ def _copy_atomic(src: Path, dst: Path) -> None:
     ranks) writing the same file each leave a complete one."""
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(f"{dst.name}.{os.getpid()}.tmp")
-    shutil.copyfile(src, tmp)
+    try:
+        shutil.copyfile(src, tmp)
+    except OSError:  # a full disk: nothing half-written left behind
+        tmp.unlink(missing_ok=True)
+        raise
     os.replace(tmp, dst)
 
 

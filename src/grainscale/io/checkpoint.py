@@ -13,14 +13,22 @@ RVEs' neighbour tables are mostly padding, and a multiscale checkpoint shrinks b
 order of magnitude for a few seconds of compression (docs/case-files.md: checkpoints).
 
 Written to `<name>.tmp.h5`, flushed and fsync'ed, then renamed onto the final name and
-the folder fsync'ed, so an interrupted write never destroys the previous file.
+the folder fsync'ed, so an interrupted write never destroys the previous file. The file is
+built in memory and written with plain writes (`write_h5_atomic`): a full disk or any
+other write error is then one OSError naming the file (HDF5's own writes failing on a
+full disk left h5py's objects half closed, and the process ended in a segmentation
+fault). A file above IMAGE_BYTES of arrays is written directly, after a check that the
+disk has room for its arrays uncompressed.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import h5py
@@ -30,6 +38,7 @@ from grainscale.io import faults
 
 ATTRS_DIGEST = "attrs_sha256"
 COMPRESS_BYTES = 1 << 20  # arrays larger than this are compressed
+IMAGE_BYTES = 1 << 30  # files with more array bytes are written directly, not built in memory
 
 
 class CorruptCheckpoint(Exception):
@@ -62,33 +71,71 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
+def _no_room(tmp: Path, need: int) -> None:
+    """OSError(ENOSPC) naming `tmp` if its folder's disk has less than `need` bytes free."""
+    free = shutil.disk_usage(tmp.parent).free
+    if free < need:
+        raise OSError(28, f"No space left on device ({need / 1e6:.1f} MB to write, "
+                          f"{free / 1e6:.1f} MB free)", str(tmp))
+
+
+def write_h5_atomic(path: Path, tmp: Path, fill: Callable[[h5py.File], None],
+                    array_bytes: int = 0, fault: str | None = None) -> None:
+    """Write the HDF5 file that `fill(f)` builds to `tmp`, fsync'ed, then rename it onto
+    `path` (module docstring); a write error (a full disk) is an OSError naming the file,
+    `tmp` removed and `path` untouched. `fault` names io/faults.py's points (tests)."""
+    try:
+        if array_bytes > IMAGE_BYTES:  # too large to hold twice: written as built
+            _no_room(tmp, array_bytes)
+            with h5py.File(tmp, "w") as f:
+                fill(f)
+                f.flush()
+                os.fsync(f.id.get_vfd_handle())
+        else:
+            buffer = io.BytesIO()
+            with h5py.File(buffer, "w") as f:
+                fill(f)
+            image = buffer.getbuffer()
+            with open(tmp, "wb") as fh:
+                fh.write(image[: len(image) // 2])
+                if fault is not None and faults.ARMED:  # a temporary file cut short
+                    fh.flush()
+                    faults.point(f"{fault}.mid_write")
+                fh.write(image[len(image) // 2:])
+                fh.flush()
+                os.fsync(fh.fileno())
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise OSError(err.errno, err.strerror, str(tmp)) from None
+    if fault is not None:
+        faults.point(f"{fault}.tmp_written")
+    os.replace(tmp, path)
+    if fault is not None:
+        faults.point(f"{fault}.renamed")
+    _fsync_dir(path.parent)
+
+
 def write_checkpoint(path: str | Path, groups: dict[str, dict[str, np.ndarray]],
                      attrs: dict[str, float | int | str], fault: str = "h5") -> None:
     """Write arrays and attributes with their checksums to `path`, atomically.
     `fault` prefixes the names of the points io/faults.py can kill at (for tests)."""
     path = Path(path)
-    tmp = path.with_name(path.stem + ".tmp.h5")
-    with h5py.File(tmp, "w") as f:
-        plain = {k: _plain(v) for k, v in attrs.items()}
+    plain = {k: _plain(v) for k, v in attrs.items()}
+
+    def fill(f: h5py.File) -> None:
         for k, v in plain.items():
             f.attrs[k] = v
         f.attrs[ATTRS_DIGEST] = attrs_digest(plain)
-        for i, (g, arrays) in enumerate(groups.items()):
+        for g, arrays in groups.items():
             grp = f.create_group(g)
             for k, a in arrays.items():
                 a = np.asarray(a)
                 opts = (dict(compression="gzip", compression_opts=1, shuffle=True)
                         if a.nbytes > COMPRESS_BYTES else {})
                 grp.create_dataset(k, data=a, **opts).attrs["sha256"] = array_digest(a)
-            if faults.ARMED and i == 0:  # a temporary file cut short (tests)
-                f.flush()
-                faults.point(f"{fault}.mid_write")
-        f.flush()
-        os.fsync(f.id.get_vfd_handle())
-    faults.point(f"{fault}.tmp_written")
-    os.replace(tmp, path)
-    faults.point(f"{fault}.renamed")
-    _fsync_dir(path.parent)
+
+    size = sum(np.asarray(a).nbytes for arrays in groups.values() for a in arrays.values())
+    write_h5_atomic(path, path.with_name(path.stem + ".tmp.h5"), fill, size, fault)
 
 
 def _read(path: Path, keep: bool) -> tuple[dict[str, dict[str, np.ndarray]], dict]:

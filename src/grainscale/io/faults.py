@@ -5,6 +5,8 @@
     GRAINSCALE_KILL_AT="NAME:N@R"    ... on MPI rank R only
     GRAINSCALE_KILL_AT="NAME:N/SIG"  ... another signal instead (TERM, INT, USR1, ...: a
                                      graceful stop's, tests/test_graceful_stop.py)
+    GRAINSCALE_KILL_AT="NAME:N/ENOSPC"  raise OSError(ENOSPC) there instead: a full disk
+                                     (tests/test_disk_full.py)
 
 The variable is read once, when this module is first imported; `arm()` sets or clears
 the target in a running process. Unset (every normal run), `point()` returns at once.
@@ -48,6 +50,7 @@ The points, in the order a step reaches them (what a kill there leaves on disk):
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import sys
@@ -67,7 +70,8 @@ ARMED = False  # a target is set: callers may skip work done only to expose a po
 _name: str | None = None
 _count = 0  # hits left before the kill
 _rank: int | None = None
-_signal = signal.SIGKILL
+_signal = signal.SIGKILL  # or ENOSPC: raise a full disk's OSError instead
+ENOSPC = "ENOSPC"
 
 
 def arm(spec: str | None) -> None:
@@ -81,12 +85,13 @@ def arm(spec: str | None) -> None:
         name, _, rest = spec_only.rpartition(":")
         n, at, rank = rest.partition("@")
         count, rank_n = int(n), int(rank) if at else None
-        sig_n = signal.Signals[f"SIG{sig}"] if sig else signal.SIGKILL
+        sig_n = ENOSPC if sig == ENOSPC else (
+            signal.Signals[f"SIG{sig}"] if sig else signal.SIGKILL)
     except (ValueError, KeyError):
         count = rank_n = name = None
     if name not in POINTS or count is None or count < 1:
         raise ValueError(f"{ENV}={spec!r}: expected NAME:N or NAME:N@RANK with N >= 1, "
-                         f"optionally /SIG (TERM, INT, ...), and NAME one of "
+                         f"optionally /SIG (TERM, INT, ...) or /ENOSPC, and NAME one of "
                          f"{', '.join(POINTS)}")
     ARMED, _name, _count, _rank, _signal = True, name, count, rank_n, sig_n
 
@@ -106,6 +111,8 @@ def point(name: str) -> None:
         return
     _count -= 1
     if _count == 0:
+        if _signal == ENOSPC:
+            raise OSError(errno.ENOSPC, "No space left on device (injected at " + name + ")")
         os.kill(os.getpid(), _signal)
 
 

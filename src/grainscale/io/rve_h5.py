@@ -9,7 +9,6 @@ renamed over the target only once complete, so an existing file stays valid.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import h5py
@@ -18,6 +17,7 @@ import numpy as np
 from grainscale import __version__
 from grainscale.config.base import ConfigError
 from grainscale.dem.state import STATE_FIELDS, RVEBatch, from_state_arrays, state_arrays
+from grainscale.io.checkpoint import write_h5_atomic
 
 FORMAT = "grainscale-rve-state v1"
 
@@ -37,15 +37,18 @@ def read_group(group: h5py.Group) -> RVEBatch:
 
 
 def write_rve_state(path: str | Path, batch: RVEBatch, params: dict | None = None) -> None:
+    """The batch's full state to `path` (.h5), atomically; a full disk is an OSError
+    naming the file (io/checkpoint.write_h5_atomic)."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
+
+    def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
         f.attrs["grainscale_version"] = __version__
         if params is not None:
             f.attrs["params"] = json.dumps(params)
         write_group(f.create_group("rve"), batch)
-    os.replace(tmp, path)
+
+    write_h5_atomic(path, path.with_name(path.name + ".tmp"), fill)
 
 
 def read_rve_state(path: str | Path) -> tuple[RVEBatch, dict | None]:
