@@ -2,6 +2,8 @@
 
 import textwrap
 
+import pytest
+
 from grainscale.cli import main
 
 CASE = """
@@ -228,6 +230,45 @@ def test_history_has_the_normalised_resistance(tmp_path):
     np.testing.assert_allclose(col["depth_over_R"], col["depth"] / R, rtol=1e-12)
     np.testing.assert_allclose(col["force_normalized"],
                                col["force"] / (0.01 * 1000.0 * 9.81 * R), rtol=1e-12)
+
+
+def test_bearing_pressure_and_plane_strain_force_per_length(tmp_path):
+    """bearing_pressure = force / S, S the plate's 0.1 m square inside the grid; with y
+    periodic (plane strain: the block and plate span the 0.2 m period) S is the plate's
+    width times the period (0.1 x 0.2 m) and force_per_length = force / 0.2 m. A
+    periodic axis along the motion is refused."""
+    import numpy as np
+
+    from grainscale.analysis import read_columns
+    from grainscale.config.base import ConfigError
+    from grainscale.config.case import load_case
+
+    text = textwrap.dedent(CASE).replace('"rigid_depth", "force"]',
+                                         '"rigid_depth", "force", "bearing_pressure"]')
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    assert main(["run", str(case), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    h = read_columns(tmp_path / "out" / "history.csv")
+    assert h["force"][-1] > 0
+    np.testing.assert_allclose(h["bearing_pressure"], h["force"] / 0.01, rtol=1e-12)
+    plane = text.replace("cells = [4, 4, 5]", 'cells = [4, 4, 5]\nperiodic = ["y"]')
+    plane = plane.replace("lo = [0.05, 0.05, 0.1]\nhi = [0.15, 0.15, 0.15]",
+                          "lo = [0.05, 0.0, 0.1]\nhi = [0.15, 0.2, 0.15]")
+    plane = plane.replace('"bearing_pressure"]', '"bearing_pressure", "force_per_length"]')
+    plane = plane.replace('[[boundaries]]\ntype = "roller"\nface = "x-"',
+                          '[[boundaries]]\ntype = "roller"\nface = "x-"\n')
+    case.write_text(plane)
+    assert main(["run", str(case), "--out", str(tmp_path / "plane"), "--quiet"]) == 0
+    h = read_columns(tmp_path / "plane" / "history.csv")
+    assert h["force"][-1] > 0
+    np.testing.assert_allclose(h["bearing_pressure"], h["force"] / 0.02, rtol=1e-12)
+    np.testing.assert_allclose(h["force_per_length"], h["force"] / 0.2, rtol=1e-12)
+    case.write_text(plane.replace('periodic = ["y"]', 'periodic = ["z"]'))
+    with pytest.raises(ConfigError):
+        load_case(case)
+    case.write_text(text.replace('"bearing_pressure"]', '"force_per_length"]'))
+    with pytest.raises(ConfigError, match="force_per_length"):
+        load_case(case)  # no periodic axis: not a plane-strain model
 
 
 def test_more_threads_than_numba_started_with_are_named(capsys):

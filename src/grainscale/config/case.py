@@ -494,7 +494,9 @@ HISTORY_COST = ("dem_steps_per_rve", "updates_per_rve")
 HISTORY_COLUMN = ("t_over_tc", "runout_ratio", "height_ratio", "front", "column_height",
                   "front_thick", "runout_ratio_thick")
 HISTORY_RIGID = ("rigid_fx", "rigid_fy", "rigid_fz", "rigid_depth", "depth", "force",
-                 "depth_over_R", "force_normalized")
+                 "depth_over_R", "force_normalized", "bearing_pressure")
+# with a rigid body and one periodic axis across its motion (plane strain)
+HISTORY_PLANE = ("force_per_length",)
 
 
 class ProbeCfg(StrictModel):
@@ -779,8 +781,20 @@ def check_case(case: Case) -> None:
         valid += HISTORY_COLUMN
     if case.rigid is not None:
         valid += HISTORY_RIGID
+        if len(case.grid.periodic) == 1:
+            valid += HISTORY_PLANE
     if any(m.type == "dem" for m in case.materials.values()):
         valid += HISTORY_DEM + HISTORY_COST
+    sectioned = {"bearing_pressure", "force_per_length"} & set(case.output.history)
+    if case.rigid is not None and sectioned:
+        v = case.rigid.velocity
+        along = [a for a, c in zip("xyz", v, strict=True) if c != 0.0]
+        if len(along) != 1 or along[0] in case.grid.periodic:
+            raise ConfigError(f"output.history has {sorted(sectioned)}, which refer to the "
+                              "rigid body's section normal to its motion (and the model's "
+                              f"thickness along grid.periodic = {case.grid.periodic}): "
+                              f"rigid.velocity = {list(v)} must lie along one grid axis, "
+                              "not a periodic one")
     normalised = {"depth_over_R", "force_normalized"} & set(case.output.history)
     if case.rigid is not None and normalised:
         v = case.rigid.velocity

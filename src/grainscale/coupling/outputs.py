@@ -121,7 +121,12 @@ def history_values(case: Case, s: MPMState, pts: Points,
         rho = float(pts.m.sum() / pts.vol0.sum()) if pts.n else math.nan
         R = s.rigid.radius
         out.update(depth_over_R=depth / R,
-                   force_normalized=force / s.rigid.area / (rho * g * R) if g > 0 else math.nan)
+                   force_normalized=force / s.rigid.area / (rho * g * R) if g > 0 else math.nan,
+                   bearing_pressure=force / s.rigid.area)  # over the section S in the grid
+        per = np.flatnonzero(s.grid.periodic)
+        if len(per) == 1:  # plane strain: the force on the model's thickness
+            lo, hi = s.grid.period_box()
+            out["force_per_length"] = force / float(hi[per[0]] - lo[per[0]])
     return out
 
 
