@@ -55,7 +55,7 @@ def test_good_case_builds(tmp_path):
                                                         "valid range"]),
     ("[solver]", "[solver]\ndt = 0.01", ["solver.dt", "0.01", "CFL limit"]),
     ("poisson_ratio = 0.3", "poisson_ratio = 0.3\npossion_ratio = 0.3",
-     ["materials.soil.linear_elastic.possion_ratio", "unknown key"]),
+     ["materials.soil.possion_ratio", "unknown key", "did you mean 'poisson_ratio'"]),
     ('type = "linear_elastic"', 'type = "hyperelastic"', ["materials.soil", "hyperelastic",
                                                           "linear_elastic"]),
     ('material = "soil"', 'material = "sand"', ["bodies[0].material", "'sand'", "soil"]),

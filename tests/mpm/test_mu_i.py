@@ -385,16 +385,16 @@ def test_column_settles_to_lithostatic_stress(tmp_path, separation):
 
 
 @pytest.mark.parametrize("old,new,words", [
-    ("mu_2 = 0.643", "mu_2 = 0.3", ["materials.beads.mu_i.mu_2", "0.3", "mu_s = 0.382"]),
-    ("mu_2 = 0.643", "mu_2 = 0.382", ["materials.beads.mu_i.mu_2", "0.382", "> mu_s"]),
-    ("I_0 = 0.279", "I_0 = 0.0", ["materials.beads.mu_i.I_0", "0.0", "greater than 0"]),
+    ("mu_2 = 0.643", "mu_2 = 0.3", ["materials.beads.mu_2", "0.3", "mu_s = 0.382"]),
+    ("mu_2 = 0.643", "mu_2 = 0.382", ["materials.beads.mu_2", "0.382", "> mu_s"]),
+    ("I_0 = 0.279", "I_0 = 0.0", ["materials.beads.I_0", "0.0", "greater than 0"]),
     ("grain_density = 2450.0", "grain_density = 1000.0",
-     ["materials.beads.mu_i.grain_density", "1000.0", "density = 1470.0"]),
+     ["materials.beads.grain_density", "1000.0", "density = 1470.0"]),
     ("grain_diameter = 0.53e-3", "grain_diameter = -1.0",
-     ["materials.beads.mu_i.grain_diameter", "-1.0"]),
-    ("mu_s = 0.382", "mus = 0.382", ["materials.beads.mu_i.mus", "unknown key"]),
+     ["materials.beads.grain_diameter", "-1.0"]),
+    ("mu_s = 0.382", "mus = 0.382", ["materials.beads.mus", "unknown key"]),
     ("mu_s = 0.382", 'mu_s = 0.382\nseparation = "memory"',
-     ["materials.beads.mu_i.separation", "memory", "reset", "recompact"]),
+     ["materials.beads.separation", "memory", "reset", "recompact"]),
 ])
 def test_bad_mu_i_input_is_named(tmp_path, old, new, words):
     assert old in CASE

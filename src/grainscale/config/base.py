@@ -6,7 +6,10 @@ what would have been valid, before any computation starts.
 
 from __future__ import annotations
 
+import difflib
 import tomllib
+import types
+import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -29,26 +32,111 @@ class StrictModel(BaseModel):
 M = TypeVar("M", bound=BaseModel)
 
 
-def _fmt_key(loc: tuple[Any, ...], prefix: str) -> str:
-    parts = [prefix] if prefix else []
+def _strip(annotation):
+    """The type inside Annotated[...] and Optional[...] (None removed from a union)."""
+    while typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        members = [a for a in typing.get_args(annotation) if a is not type(None)]
+        if len(members) == 1:
+            return _strip(members[0])
+    return annotation
+
+
+def _is_model(t) -> bool:
+    return isinstance(t, type) and issubclass(t, BaseModel)
+
+
+def _tagged(union, tag):
+    """The member of a tagged union of models whose Literal field holds `tag`."""
+    for member in typing.get_args(union):
+        member = _strip(member)
+        if _is_model(member) and any(
+                tag in typing.get_args(_strip(f.annotation))
+                for f in member.model_fields.values()
+                if typing.get_origin(_strip(f.annotation)) is typing.Literal):
+            return member
+    return None
+
+
+def _walk(model, loc: tuple[Any, ...]):
+    """The key as the user writes it (pydantic's location with the tags of tagged unions
+    left out), the model holding the last item (None where the walk got lost) and the
+    type at the end of the location."""
+    parts, cur, parent = [], model, None
     for item in loc:
-        parts.append(f"[{item}]" if isinstance(item, int) else str(item))
-    return ".".join(parts).replace(".[", "[")
+        cur = _strip(cur)
+        if _is_model(cur) and isinstance(item, str):
+            fields = {f.alias or n: f for n, f in cur.model_fields.items()}
+            parent = cur
+            parts.append(item)
+            cur = fields[item].annotation if item in fields else None
+        elif isinstance(item, int):
+            parts.append(f"[{item}]")
+            args = typing.get_args(cur)
+            cur = args[0] if args else None
+            parent = None
+        elif typing.get_origin(cur) is dict:
+            parts.append(str(item))
+            cur = typing.get_args(cur)[1]
+            parent = None
+        elif typing.get_origin(cur) in (typing.Union, types.UnionType):
+            member = _tagged(cur, item)
+            if member is None:  # not a tag: pydantic's own segment, e.g. a validator's
+                parts.append(str(item))
+            cur = member
+        else:
+            parts.append(str(item))
+            cur, parent = None, None
+    return ".".join(parts).replace(".[", "["), parent, cur
 
 
-def format_validation_error(err: ValidationError, source: str = "", prefix: str = "") -> str:
-    """One line per problem: `key = value: reason`."""
+def _message(e: dict, parent, end) -> str:
+    """The reason of one pydantic error, in the case file's words."""
+    kind = e["type"]
+    if kind == "missing":
+        return "required key is missing"
+    if kind == "extra_forbidden":
+        unknown = str(e["loc"][-1])
+        hint = ""
+        if parent is not None:
+            valid = sorted(f.alias or n for n, f in parent.model_fields.items())
+            close = difflib.get_close_matches(unknown, valid, n=1, cutoff=0.6)
+            hint = (f"did you mean {close[0]!r}? " if close else "") + \
+                f"valid keys here: {', '.join(valid)}"
+        return f"unknown key; {hint or 'see docs/case-files.md for valid keys'}"
+    if kind in ("tuple_type", "too_short", "too_long") and \
+            typing.get_origin(_strip(end)) is tuple:
+        n = len(typing.get_args(_strip(end)))
+        return f"expected a list of {n} values, e.g. [{', '.join(['0.0'] * n)}]"
+    msg = e["msg"]
+    for prefix in ("Value error, ", "Assertion failed, "):
+        if msg.startswith(prefix):
+            msg = msg[len(prefix):]
+    return msg
+
+
+def format_validation_error(err: ValidationError, source: str = "", prefix: str = "",
+                            model=None) -> str:
+    """One line per problem: `key = value: reason`, the key as the file writes it (with
+    `model`, the validated class: tagged unions' tags left out, and unknown keys get the
+    valid ones and the nearest match)."""
     lines = []
     for e in err.errors():
-        key = _fmt_key(e["loc"], prefix)
-        msg = e["msg"]
-        if e["type"] == "extra_forbidden":
-            msg = "unknown key (check the spelling; see docs/case-files.md for valid keys)"
+        loc = e["loc"]
+        key, parent, end = _walk(model, loc) if model is not None else (None, None, None)
+        if key is None:
+            key = ".".join(f"[{i}]" if isinstance(i, int) else str(i) for i in loc)
+            key = key.replace(".[", "[")
+        if prefix:
+            key = f"{prefix}.{key}" if key else prefix
+        if e["type"] == "extra_forbidden" and model is not None:
+            parent = _walk(model, loc[:-1])[2]
+            parent = _strip(parent) if parent is not None else None
+            parent = parent if _is_model(parent) else None
         value = e.get("input")
-        shown = "" if e["type"] == "missing" else f" = {value!r}"
-        if e["type"] == "missing":
-            msg = "required key is missing"
-        lines.append(f"  {key}{shown}: {msg}")
+        shown = "" if e["type"] == "missing" or isinstance(value, dict) else f" = {value!r}"
+        lines.append(f"  {key}{shown}: {_message(e, parent, end)}")
     head = f"invalid input in {source}:" if source else "invalid input:"
     return "\n".join([head, *lines])
 
@@ -58,7 +146,7 @@ def validate(model: type[M], data: dict[str, Any], source: str = "", prefix: str
     try:
         return model.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(format_validation_error(err, source, prefix)) from None
+        raise ConfigError(format_validation_error(err, source, prefix, model)) from None
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

@@ -23,6 +23,7 @@ strain_rate = 0.1          # 1/s, quasi-static
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -116,7 +117,28 @@ class RVEParams(StrictModel):
             raise ValueError(
                 f"radius_max = {self.radius_max!r} is below radius_min = "
                 f"{self.radius_min!r}; valid range: radius_max >= radius_min")
+        least = min_particles(self.radius_min, self.radius_max,
+                              self.preparation.initial_porosity)
+        if self.particles < least:
+            raise ValueError(
+                f"particles = {self.particles} is too few for radii {self.radius_min:g}-"
+                f"{self.radius_max:g} m: the cell they are inserted in (at initial_porosity "
+                f"{self.preparation.initial_porosity:g}) would be narrower than 8 "
+                f"radius_max; valid: particles >= {least} for these radii")
         return self
+
+
+def min_particles(radius_min: float, radius_max: float, initial_porosity: float) -> int:
+    """The fewest spheres whose insertion cell (dem/generate.insert_random: a cube at
+    `initial_porosity`) is on average at least 8 radius_max wide, so that the cell is
+    wider than twice the neighbour search's reach (4 diameters) [-]: n (4/3) pi <r^3> =
+    (1 - phi_i) (8 r_max)^3, <r^3> = (b^4 - a^4) / (4 (b - a)) for radii uniform in
+    [a, b]. Random radii can still make a count just above it fail (the generator then
+    says so)."""
+    a, b = radius_min, radius_max
+    mean_r3 = a ** 3 if b == a else (b ** 4 - a ** 4) / (4.0 * (b - a))
+    return math.ceil((1.0 - initial_porosity) * (8.0 * b) ** 3
+                     / (4.0 / 3.0 * math.pi * mean_r3) - 1e-9)
 
 
 class TriaxialTest(StrictModel):

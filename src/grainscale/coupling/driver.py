@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import sys
 import time as wallclock
 import traceback
@@ -137,6 +138,10 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
     comm = comm if comm is not None else world()
     case_dir = case._case_dir or Path.cwd()
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {out}: is a file; valid: a folder (new, or a run's to "
+                          "--resume or replace)")
+    created = not out.exists()  # removed again if an input error leaves it empty
     if device is not None:  # --device: recorded as the case's solver.device
         case.solver.device = device
     record = checkpoints.case_record(case)  # before the run fills in values
@@ -159,6 +164,8 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
         return _run(case, record, case_dir, out, comm, max_steps, steps_this_run, every,
                     found, progress, probes, on_step)
     except ConfigError:
+        if created and comm.root:
+            _remove_if_empty(out)  # invalid input leaves no output folder behind
         raise  # raised by every rank (see above): printed once by rank 0
     except OSError as err:  # disk full, folder not writable: every file is written
         # atomically or cut back on resume, so the last checkpoint stays valid
@@ -178,6 +185,13 @@ def run_loaded_case(case: Case, out, *, max_steps: int | None = None,
             comm.abort(2)
             os._exit(2)  # if the MPI library returns from Abort
         raise
+
+
+def _remove_if_empty(folder: Path) -> None:
+    """Remove `folder` if it holds nothing but empty folders."""
+    if any(p.is_file() for p in folder.rglob("*")):
+        return
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 # what a run writes besides history.csv and the checkpoints (module docstring); a new run

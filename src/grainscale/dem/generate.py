@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from grainscale.config.base import ConfigError
-from grainscale.config.rve import RVEParams
+from grainscale.config.rve import RVEParams, min_particles
 from grainscale.dem import engine, homogenise
 from grainscale.dem.state import RVEBatch, from_packing
 
@@ -65,7 +65,8 @@ def insert_random(n: int, rmin: float, rmax: float, porosity: float,
     if side < 4.0 * (2.0 * rmax):
         raise GenerationError(
             f"rve.particles = {n} is too few for radius_max = {rmax}: the cell side "
-            f"{side:.4g} m would be below 8 r_max; use more particles")
+            f"{side:.4g} m would be below 8 r_max (these random radii); valid: more, "
+            f"at least {min_particles(rmin, rmax, porosity)} on average and a few more")
     order = np.argsort(-radii, kind="stable")
     pos = np.empty((n, 3))
     placed = 0
