@@ -83,3 +83,21 @@ def test_disabled_is_silent():
     bar.update(0.5, 1)
     bar.close()
     assert stream.getvalue() == ""
+
+
+def test_the_eta_waits_for_the_rate_to_settle(clock):
+    """A first update that takes 600 s (numba compiling) and then 0.1 s each: no ETA
+    while the rate is the compile's, then the one of the steps that follow (60 updates
+    of 1/100 and 6 s later: 0.39 left at 0.1 a second, 4 s), not the hour the first
+    update's rate would give."""
+    out = io.StringIO()
+    bar = Progress(0.0, 1.0, 0.0, 0, enabled=True, stream=out)
+    clock.now = 600.0
+    bar.update(0.01, 1)
+    bar._line(clock.now)
+    assert out.getvalue().rstrip().endswith("ETA ?")
+    for k in range(2, 62):
+        clock.now += 0.1
+        bar.update(0.01, k)
+    bar._line(clock.now)
+    assert out.getvalue().rstrip().endswith("10 steps/s, ETA 0:00:04")

@@ -45,6 +45,10 @@ def _bar_class(stream):
     return tqdm
 
 
+SETTLE_UPDATES = 5  # updates after the first before an ETA is shown
+SETTLE_S = 5.0  # ... and seconds
+
+
 class Progress:
     """A quantity (simulated time, strain, ...) advancing from t0 to t_end, by
     update(increment, step); `quantity` and `unit` name it in the bar and the lines,
@@ -70,11 +74,19 @@ class Progress:
         self.start_time, self.start_step = time_now, step
         self.tick_step = step
         self.time, self.step = time_now, step
+        # the rate for the ETA is measured from the end of the first update on: the first
+        # holds numba's compilation (minutes where a step then takes milliseconds)
+        self.warm: tuple[float, float, int, int] | None = None  # wall, quantity, updates,
+        #                                                         and step there
+        self.updates = 0
 
     def update(self, increment: float, step: int | None = None) -> None:
         self.time += increment
         self.step = step
         now = time.perf_counter()
+        self.updates += 1
+        if self.warm is None:
+            self.warm = (now, self.time, self.updates, step or 0)
         if self.bar is not None:
             self.bar.update(min(increment, self.bar.total - self.bar.n))  # round-off
             if step is not None and now - self.tick > 1.0:
@@ -95,14 +107,19 @@ class Progress:
         done = (self.time - self.t0) / span if span > 0 else 1.0
         elapsed = now - self.start
         left = self.t_end - self.time
-        speed = (self.time - self.start_time) / elapsed if elapsed > 0 else 0.0
-        eta = timedelta(seconds=round(left / speed)) if speed > 0 else "?"
+        eta = "?"  # until the rate has settled: a few updates and seconds after the first
+        settled = (self.warm is not None and self.updates - self.warm[2] >= SETTLE_UPDATES
+                   and now - self.warm[0] >= SETTLE_S)
+        if settled:
+            speed = (self.time - self.warm[1]) / (now - self.warm[0])
+            eta = timedelta(seconds=round(left / speed)) if speed > 0 else "?"
         unit = f" {self.unit}" if self.unit else ""
         head = f"{self.label}: "
         rate = ""
         if self.step is not None:
             head += f"step {self.step}, "
-            steps = (self.step - self.start_step) / elapsed if elapsed > 0 else 0.0
+            steps = ((self.step - self.warm[3]) / (now - self.warm[0]) if settled
+                     else (self.step - self.start_step) / elapsed if elapsed > 0 else 0.0)
             rate = f", {steps:.0f} steps/s"
         print(f"{head}{self.quantity} = {self.time:.6g} / {self.t_end:.6g}{unit} "
               f"({100 * done:.1f} %){rate}, ETA {eta}", file=self.stream, flush=True)
