@@ -81,3 +81,27 @@ def test_misspelled_table_is_named(tmp_path, capsys):
     code, err = run(tmp_path, capsys, GOOD + "[triaxal]\nstrain_rate = 0.1\n")
     assert code == 2
     assert "triaxal" in err and "unknown key" in err, err
+
+
+def test_an_element_test_without_its_table_names_its_defaults(tmp_path, capsys, monkeypatch):
+    """`grainscale rve isotropic` on a file without [isotropic] says which defaults it
+    runs (before preparing anything: the preparation is stubbed out here); with the
+    table it says nothing."""
+
+    class Prepared(Exception):
+        pass
+
+    def stop(*args, **kw):
+        raise Prepared
+
+    monkeypatch.setattr("grainscale.cli.rve.prepared", stop)
+    params = tmp_path / "p.toml"
+    params.write_text("[rve]\nparticles = 150\n")
+    with pytest.raises(Prepared):
+        main(["rve", "isotropic", str(params), "--out", str(tmp_path / "o.csv"), "--quiet"])
+    err = capsys.readouterr().err
+    assert "has no [isotropic] table: the defaults pressure_final = 1000000.0" in err
+    params.write_text("[rve]\nparticles = 150\n[isotropic]\npressure_final = 2e5\n")
+    with pytest.raises(Prepared):
+        main(["rve", "isotropic", str(params), "--out", str(tmp_path / "o.csv"), "--quiet"])
+    assert "defaults" not in capsys.readouterr().err

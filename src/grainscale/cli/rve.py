@@ -4,6 +4,7 @@ functions of grainscale.rve (docs/api.md)."""
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -68,6 +69,12 @@ def dispatch(args: argparse.Namespace) -> int:
         raise ConfigError(f"--packing = {str(args.packing)!r}: file does not exist")
     if args.rve_command == "flow":
         return run_flow(case, args)
+    table = args.rve_command
+    if table not in case.model_fields_set:  # the file has no table for this test
+        defaults = getattr(case, table).model_dump()
+        print(f"grainscale: {args.params} has no [{table}] table: the defaults "
+              + ", ".join(f"{k} = {v!r}" for k, v in defaults.items())
+              + " (docs/case-files.md)", file=sys.stderr)
     batch = prepared(case, args.packing, args.quiet)
     run, x = {"triaxial": (rve.triaxial, "axial_strain"),
               "undrained": (rve.undrained, "axial_strain"),
