@@ -3,6 +3,8 @@ message on stderr that names the key and the bad value."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from grainscale.cli import main
@@ -105,3 +107,37 @@ def test_an_element_test_without_its_table_names_its_defaults(tmp_path, capsys, 
     with pytest.raises(Prepared):
         main(["rve", "isotropic", str(params), "--out", str(tmp_path / "o.csv"), "--quiet"])
     assert "defaults" not in capsys.readouterr().err
+
+
+def test_too_few_particles_for_the_radii_are_refused_before_any_generation(tmp_path,
+                                                                          capsys):
+    """60 spheres of 3-7 mm cannot fill a cell 8 radius_max wide at the insertion
+    porosity (0.7) even with radii 3 standard deviations above their mean: refused with
+    the smallest valid count, by `rve generate` and by `run` of a multiscale case, before
+    a packing is generated or a folder made."""
+    from grainscale.config.rve import RVEParams, min_particles
+
+    assert min_particles(3e-3, 7e-3, 0.7) == 87  # the mean radius^3 fills it
+    least = min_particles(3e-3, 7e-3, 0.7, spread=3.0)
+    assert 60 < least < 87
+    # the count that fills the cell on average: n (4/3) pi <r^3> = 0.3 (8 r_max)^3
+    a, b = 3e-3, 7e-3
+    mean_r3 = (b**4 - a**4) / (4 * (b - a))
+    assert 86 < 0.3 * (8 * b) ** 3 / (4 / 3 * 3.141592653589793 * mean_r3) <= 87
+    params = tmp_path / "p.toml"
+    params.write_text("[rve]\nparticles = 60\n")
+    assert RVEParams(particles=60).radius_max == 7e-3  # the defaults used above
+    assert main(["rve", "generate", str(params), "--out", str(tmp_path / "p.h5"),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "rve.particles = 60 is too few" in err and f">= {least}" in err
+    assert not (tmp_path / "p.h5").exists()
+    case = Path(__file__).parents[1] / "examples" / "unit_element" / "case.toml"
+    text = case.read_text()
+    assert "\nparticles = " in text
+    small = tmp_path / "case.toml"
+    small.write_text("\n".join("particles = 60" if ln.startswith("particles =") else ln
+                               for ln in text.splitlines()))
+    assert main(["run", str(small), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert f">= {least}" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -19,7 +19,7 @@ import numpy as np
 
 from grainscale.config.base import ConfigError
 from grainscale.config.case import Case, load_rve_case
-from grainscale.config.rve import RVECase
+from grainscale.config.rve import RVECase, check_particles
 from grainscale.dem import element_tests, engine
 from grainscale.dem.generate import contact_params
 from grainscale.dem.generate import generate as _generate
@@ -105,6 +105,7 @@ def generate(params: RVECase | Case | str | Path, *, seed: int | None = None,
     """
     case = _case(params)
     rve = case.rve if seed is None else case.rve.model_copy(update={"seed": int(seed)})
+    check_particles(rve)  # before any generation
     if path is not None:
         from grainscale.coupling.materials import cached_packing
 

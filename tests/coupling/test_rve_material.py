@@ -364,7 +364,7 @@ hi = [0.05, 0.05, 0.05]
 [output]
 interval = 0.005
 [rve]
-particles = 50
+particles = 100
 {rve}
 """
 

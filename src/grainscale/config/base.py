@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import tomli_w
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError
 
 from grainscale import __version__
 
@@ -24,9 +24,49 @@ class ConfigError(ValueError):
 
 
 class StrictModel(BaseModel):
-    """Base of all case-file tables: unknown keys are errors, values are re-validated."""
+    """Base of all case-file tables: unknown keys are errors, values are re-validated,
+    also when assigned from Python, where an invalid value or an unknown key raises
+    ConfigError with the key's dotted path in the case (`_path`), as a file's would."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
+    _path: str = PrivateAttr(default="")
+
+    def model_post_init(self, context: Any) -> None:
+        _label(self, self._path)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name.startswith("_"):
+            return super().__setattr__(name, value)
+        where = f"{self._path}.{name}" if self._path else name
+        fields = {f.alias or n for n, f in type(self).model_fields.items()}
+        if name not in fields:
+            close = difflib.get_close_matches(name, sorted(fields), n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ConfigError(f"{where}: unknown key; {hint}valid keys here: "
+                              f"{', '.join(sorted(fields))}")
+        try:
+            super().__setattr__(name, value)
+        except ValidationError as err:
+            raise ConfigError(format_validation_error(err, prefix=self._path,
+                                                      model=type(self))) from None
+        _label(self, self._path)
+
+
+def _label(model: BaseModel, path: str) -> None:
+    """Give every table under `model` its dotted path in the case (for messages)."""
+    for name in type(model).model_fields:
+        value = getattr(model, name, None)
+        key = f"{path}.{name}" if path else name
+        items = (value.items() if isinstance(value, dict) else
+                 ((f"[{i}]", v) for i, v in enumerate(value))
+                 if isinstance(value, list) else [("", value)])
+        for sub, v in items:
+            if isinstance(v, StrictModel):
+                here = key if not sub else (f"{key}{sub}" if sub.startswith("[")
+                                            else f"{key}.{sub}")
+                object.__setattr__(v, "__pydantic_private__",
+                                   {**(v.__pydantic_private__ or {}), "_path": here})
+                _label(v, here)
 
 
 M = TypeVar("M", bound=BaseModel)
@@ -135,7 +175,8 @@ def format_validation_error(err: ValidationError, source: str = "", prefix: str 
             parent = _strip(parent) if parent is not None else None
             parent = parent if _is_model(parent) else None
         value = e.get("input")
-        shown = "" if e["type"] == "missing" or isinstance(value, dict) else f" = {value!r}"
+        shown = ("" if e["type"] == "missing" or isinstance(value, (dict, BaseModel))
+                 else f" = {value!r}")
         lines.append(f"  {key}{shown}: {_message(e, parent, end)}")
     head = f"invalid input in {source}:" if source else "invalid input:"
     return "\n".join([head, *lines])

@@ -24,6 +24,7 @@ from grainscale.config.rve import (
     ShearTest,
     TriaxialTest,
     UndrainedTest,
+    check_particles,
 )
 
 Vec3 = tuple[float, float, float]
@@ -725,6 +726,9 @@ def check_case(case: Case) -> None:
                if m.type == "dem" and m.time_integration == "dynamic"]
     quasi_static = [n for n, m in case.materials.items()
                     if m.type == "dem" and m.time_integration == "quasi_static"]
+    if case.rve is not None and any(not case.materials[n].packings
+                                    for n in dynamic + quasi_static):
+        check_particles(case.rve)  # packings to generate: before any generation starts
     for name in dynamic + quasi_static:
         m = case.materials[name]
         if m.update_tolerance is None:  # written so in case.resolved.toml, but still a

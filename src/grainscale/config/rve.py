@@ -117,28 +117,46 @@ class RVEParams(StrictModel):
             raise ValueError(
                 f"radius_max = {self.radius_max!r} is below radius_min = "
                 f"{self.radius_min!r}; valid range: radius_max >= radius_min")
-        least = min_particles(self.radius_min, self.radius_max,
-                              self.preparation.initial_porosity)
-        if self.particles < least:
-            raise ValueError(
-                f"particles = {self.particles} is too few for radii {self.radius_min:g}-"
-                f"{self.radius_max:g} m: the cell they are inserted in (at initial_porosity "
-                f"{self.preparation.initial_porosity:g}) would be narrower than 8 "
-                f"radius_max; valid: particles >= {least} for these radii")
         return self
 
 
-def min_particles(radius_min: float, radius_max: float, initial_porosity: float) -> int:
+def check_particles(params: RVEParams, key: str = "rve.particles") -> None:
+    """ConfigError, before any packing is generated from `params`, if its particle count
+    cannot fill the insertion cell (min_particles at 3 standard deviations)."""
+    from grainscale.config.base import ConfigError
+
+    phi = params.preparation.initial_porosity
+    least = min_particles(params.radius_min, params.radius_max, phi, spread=3.0)
+    if params.particles < least:
+        mean = min_particles(params.radius_min, params.radius_max, phi)
+        raise ConfigError(
+            f"{key} = {params.particles} is too few for radii {params.radius_min:g}-"
+            f"{params.radius_max:g} m: the cell they are inserted in (at initial_porosity "
+            f"{phi:g}) would be narrower than 8 radius_max even for radii 3 standard "
+            f"deviations above their mean; valid: {key} >= {least} ({mean} or more to "
+            "fill it on average, whatever the seed)")
+
+
+def min_particles(radius_min: float, radius_max: float, initial_porosity: float,
+                  spread: float = 0.0) -> int:
     """The fewest spheres whose insertion cell (dem/generate.insert_random: a cube at
-    `initial_porosity`) is on average at least 8 radius_max wide, so that the cell is
-    wider than twice the neighbour search's reach (4 diameters) [-]: n (4/3) pi <r^3> =
-    (1 - phi_i) (8 r_max)^3, <r^3> = (b^4 - a^4) / (4 (b - a)) for radii uniform in
-    [a, b]. Random radii can still make a count just above it fail (the generator then
-    says so)."""
+    `initial_porosity`) is at least 8 radius_max wide, wider than twice the neighbour
+    search's reach (4 diameters), when their summed r^3 is `spread` standard deviations
+    above its mean [-]: (4/3) pi sum r^3 = (1 - phi_i) (8 r_max)^3, with radii uniform
+    in [a, b]: mean r^3 <r^3> = (b^4 - a^4) / (4 (b - a)), variance <r^6> - <r^3>^2,
+    <r^6> = (b^7 - a^7) / (7 (b - a)). spread 0: the count that fills it on average;
+    3: below that count, generation fails whatever the seed (but 1 in ~700)."""
     a, b = radius_min, radius_max
-    mean_r3 = a ** 3 if b == a else (b ** 4 - a ** 4) / (4.0 * (b - a))
-    return math.ceil((1.0 - initial_porosity) * (8.0 * b) ** 3
-                     / (4.0 / 3.0 * math.pi * mean_r3) - 1e-9)
+    if b == a:
+        m3, var = a ** 3, 0.0
+    else:
+        m3 = (b ** 4 - a ** 4) / (4.0 * (b - a))
+        var = max((b ** 7 - a ** 7) / (7.0 * (b - a)) - m3 * m3, 0.0)
+    need = (1.0 - initial_porosity) * (8.0 * b) ** 3 / (4.0 / 3.0 * math.pi)
+    n = 1
+    while n * m3 + spread * math.sqrt(n * var) < need * (1.0 - 1e-12):
+        n += 1
+    return n
 
 
 class TriaxialTest(StrictModel):
