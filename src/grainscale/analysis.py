@@ -374,5 +374,5 @@ def plot_flow(path: str | Path, table: dict, fits: dict, title: str = "") -> Non
 
 
 __all__ = ["deposit_profile", "deviation", "front_at_thickness", "k_phi", "neighbour_median", "p_q",
-           "phi_for_k", "plot_flow", "plot_stress_path", "read_columns", "read_frame",
+           "phi_for_k", "plot_flow", "plot_stress_path", "read_columns", "read_frame", "t95",
            "unit_element_metrics", "write_columns"]

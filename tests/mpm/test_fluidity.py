@@ -145,8 +145,8 @@ def test_column_case_settles_to_lithostatic_stress(tmp_path):
 
 
 @pytest.mark.parametrize("value,words", [
-    ("nonlocal_amplitude = 0.0", ["nonlocal_mu_i.nonlocal_amplitude", "0.0", "greater than 0"]),
-    ("fluidity_time = -1.0", ["nonlocal_mu_i.fluidity_time", "-1.0", "greater than 0"]),
+    ("nonlocal_amplitude = 0.0", ["materials.beads.nonlocal_amplitude", "0.0", "greater than 0"]),
+    ("fluidity_time = -1.0", ["materials.beads.fluidity_time", "-1.0", "greater than 0"]),
 ])
 def test_bad_nonlocal_input_is_named(tmp_path, value, words):
     from test_mu_i import CASE, _load
