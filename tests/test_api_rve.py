@@ -162,6 +162,7 @@ def test_flow_gives_the_cli_table_and_names_bad_arguments(tmp_path, capsys):
         gs.rve.flow(case, progress=False)
 
 
+@pytest.mark.validation  # 7 s of element tests
 def test_several_packings_tested_together_give_each_its_own_curve(params, tmp_path):
     """packing() of several files and triaxial(per_rve=True): one curve per RVE. Two
     copies of one packing give, each, the curve of that packing tested alone (a batch

@@ -61,6 +61,7 @@ def test_undamped_column_does_not_gain_energy(tmp_path):
     assert last < 4.0 / 3.0 * first, (first, last)
 
 
+@pytest.mark.validation  # 17 s; the fast tier keeps the coupling's other energy tests
 def test_damped_quasi_static_column_never_exceeds_its_initial_energy(tmp_path):
     """Quasi-static RVEs with local damping 0.2 at 2e-6 per DEM step, every RVE stepped
     every MPM step (the coupling itself; adaptive updates are the last test's), and at

@@ -193,6 +193,7 @@ def serial(serial_out):
     return (serial_out / "history.csv").read_text()
 
 
+@pytest.mark.validation  # 15 s of MPI jobs; the graded grid's below stays in the fast tier
 def test_ranks_give_identical_history_with_tractions(tmp_path):
     """Phenomenological material, MUSL, gravity and a traction shared by the ranks."""
     case = tmp_path / "mc.toml"

@@ -118,6 +118,7 @@ def test_a_layer_thinner_than_h_stop_stays_a_thicker_one_flows():
 NONLOCAL = 'type = "nonlocal_mu_i"\nnonlocal_amplitude = 0.48\nfluidity_time = 1e-3'
 
 
+@pytest.mark.validation  # 5 s; the fluidity's unit tests stay in the fast tier
 def test_column_case_settles_to_lithostatic_stress(tmp_path):
     """test_mu_i.py's 1 m column in a case file, with the nonlocal law: it must yield
     while it loads (oedometric tau/p = 0.53 > mu_s), the fluidity lets it, and damped to

@@ -69,6 +69,7 @@ def test_layer_reaches_the_bagnold_profile():
     assert ratio == pytest.approx(expected, rel=0.03)
 
 
+@pytest.mark.validation  # 5 s
 def test_layer_below_the_angle_of_repose_stays():
     """20 deg < atan(mu_s) = 20.9 deg: the layer does not flow (after the release of its
     isotropic start stress it rings elastically at ~1 mm/s, against 0.25 m/s after
