@@ -92,6 +92,32 @@ def interrupted_history(case: Path, out: Path, first: int, steps: int, then: int
     return (out / "history.csv").read_text()
 
 
+def same_history_everywhere(path: Path, ref: Path, tmp: Path, stop_at: int) -> None:
+    """CASE's history.csv is the serial run's in `ref` to the byte on 1 rank with 2
+    threads, on 2 ranks, and on 3 ranks stopped at step `stop_at` and resumed on 2 (each
+    from the serial run's packings, so no run regenerates them)."""
+    history = (ref / "history.csv").read_text()
+
+    def fresh(name):
+        out = tmp / name
+        shutil.copytree(ref / "packings", out / "packings")
+        return out
+
+    out = fresh("threads2")
+    r = subprocess.run([sys.executable, "-m", "grainscale", "run", str(path), "--out",
+                        str(out), "--quiet", "--threads", "2"], capture_output=True, text=True,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "2"}, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 threads differ"
+    out = fresh("ranks2")
+    r = mpirun(2, ["run", str(path), "--out", str(out), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert (out / "history.csv").read_text() == history, "2 ranks differ"
+    out = fresh("ranks3")
+    assert interrupted_history(path, out, first=3, steps=stop_at, then=2) == history, \
+        "3 ranks resumed on 2 differ"
+
+
 COLUMN = Path(__file__).resolve().parents[2] / "examples" / "column_collapse" / "quick.toml"
 
 
@@ -403,23 +429,7 @@ def test_adaptive_updates_are_rank_thread_independent_and_resume_bitwise(rve_cas
     stepped = json.loads((ref / "cost.json").read_text())["fraction_of_rves_stepped"]
     assert 0.3 < stepped < 0.95, stepped
 
-    def fresh(name):  # the serial run's packings, so no run regenerates them
-        out = tmp_path / name
-        shutil.copytree(ref / "packings", out / "packings")
-        return out
-
-    out = fresh("threads2")
-    r = subprocess.run([sys.executable, "-m", "grainscale", "run", str(path), "--out",
-                        str(out), "--quiet", "--threads", "2"], capture_output=True, text=True,
-                       env={**os.environ, "NUMBA_NUM_THREADS": "2"}, timeout=600)
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == history, "2 threads differ"
-    out = fresh("ranks2")
-    r = mpirun(2, ["run", str(path), "--out", str(out), "--quiet"])
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == history, "2 ranks differ"
-    out = fresh("ranks3")
-    assert interrupted_history(path, out, first=3, steps=9, then=2) == history
+    same_history_everywhere(path, ref, tmp_path, stop_at=9)
 
 
 @pytest.mark.validation  # 30 s; a serial resume with sleeping RVEs is in the fast tier
@@ -439,28 +449,7 @@ def test_sleeping_rves_are_rank_thread_independent_and_resume_bitwise(tmp_path):
     rows = [r.split(",") for r in history.splitlines() if r[:1].isdigit()]
     assert float(rows[-1][-1]) < 0.97 * int(rows[-1][0])  # updates_per_rve: some slept
 
-    def fresh(name):
-        out = tmp_path / name
-        shutil.copytree(ref / "packings", out / "packings")
-        return out
-
-    out = fresh("threads2")
-    r = subprocess.run([sys.executable, "-m", "grainscale", "run", str(path), "--out",
-                        str(out), "--quiet", "--threads", "2"], capture_output=True, text=True,
-                       env={**os.environ, "NUMBA_NUM_THREADS": "2"}, timeout=600)
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == history, "2 threads differ"
-    out = fresh("ranks2")
-    r = mpirun(2, ["run", str(path), "--out", str(out), "--quiet"])
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == history, "2 ranks differ"
-    out = fresh("ranks3")
-    common = ["run", str(path), "--out", str(out), "--quiet", "--checkpoint-every", "10"]
-    r = mpirun(3, [*common, "--max-steps", "47"])
-    assert r.returncode == 0, r.stderr
-    r = mpirun(2, [*common, "--resume"])
-    assert r.returncode == 0, r.stderr
-    assert (out / "history.csv").read_text() == history, "3 ranks resumed on 2 differ"
+    same_history_everywhere(path, ref, tmp_path, stop_at=47)
 
 
 @pytest.mark.validation
