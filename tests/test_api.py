@@ -190,3 +190,22 @@ def test_edited_and_continuum_twin(tmp_path):
 
     with pytest.raises(gs.ConfigError, match="needs an \\[rve\\] table"):
         case.edited(drop_rve)  # a 'dem' material without its RVE
+
+
+def test_an_invalid_assignment_names_the_key_as_the_file_writes_it():
+    """Edits from Python are validated as a file is and raise the CLI's ConfigError text
+    with the key's dotted path in the case: a value out of range, a vector of the wrong
+    length, a misspelt key (with the nearest valid one), a table's own check."""
+    case = gs.load_case(EXAMPLES / "column_collapse" / "quick.toml")
+    with pytest.raises(gs.ConfigError, match=r"rve\.preparation\.porosity = 0\.9: Input "
+                                             r"should be less than 0\.5"):
+        case.rve.preparation.porosity = 0.9
+    with pytest.raises(gs.ConfigError, match=r"bodies\[0\]\.hi = 0\.2: expected a list of "
+                                             r"3 values"):
+        case.bodies[0].hi = 0.2
+    with pytest.raises(gs.ConfigError, match=r"time\.ned: unknown key; did you mean 'end'"):
+        case.time.ned = 3.0
+    with pytest.raises(gs.ConfigError, match=r"time: time\.end = -1\.0 must be > time\.start"):
+        case.time.end = -1.0
+    case.time.end = 0.3  # a valid edit goes through
+    assert case.time.end == 0.3
