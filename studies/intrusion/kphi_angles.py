@@ -209,8 +209,8 @@ def common_ratio(folder_a: Path, a: dict, folder_b: Path, b: dict) -> dict:
     """K_a / K_b fitted over the two rule windows' common span, with its uncertainty
     from both K_phi_u."""
     lo, hi = max(a["window"][0], b["window"][0]), min(a["window"][1], b["window"][1])
-    fa = fit(folder_a, 20.0, 0.0, start=lo, stop=hi + 1e-9)
-    fb = fit(folder_b, 20.0, 0.0, start=lo, stop=hi + 1e-9)
+    fa = fit(folder_a, 20.0, 0.0, start=lo, stop=hi + 1e-6)
+    fb = fit(folder_b, 20.0, 0.0, start=lo, stop=hi + 1e-6)
     ratio = fa["K_phi"] / fb["K_phi"]
     rel = math.hypot(fa.get("K_phi_u", fa["K_phi_stderr"]) / fa["K_phi"],
                      fb.get("K_phi_u", fb["K_phi_stderr"]) / fb["K_phi"])
@@ -246,7 +246,7 @@ def rows(data: Path, min_window: float) -> list[dict]:
         row["windows"] = []
         for lo, hi in WINDOWS:
             hi = min(hi, row["window"][1])
-            w = fit(folder, row["phi_deg"], 0.0, start=lo, stop=hi + 1e-9)
+            w = fit(folder, row["phi_deg"], 0.0, start=lo, stop=hi + 1e-6)
             row["windows"].append({"window": [lo, hi], "K_phi": w["K_phi"],
                                    "K_phi_u": w.get("K_phi_u") or w["K_phi_stderr"],
                                    "linear": w["linear"]})
