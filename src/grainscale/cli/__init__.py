@@ -65,6 +65,14 @@ def build_parser() -> argparse.ArgumentParser:
                           "the `cuda` extra)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    check = sub.add_parser("check", help="what a run of a case would be, without running it")
+    check.add_argument("case", type=Path, help="case file (TOML)")
+    check.add_argument("--threads", type=_positive_int, default=None,
+                       help="numba threads for the timed DEM steps (default: as a run)")
+    check.add_argument("--dem-steps", type=float, default=None,
+                       help="assumed DEM steps per RVE and MPM step of quasi-static RVEs "
+                            "(default 6)")
+
     rve = sub.add_parser("rve", help="pure DEM work on one periodic RVE")
     rsub = rve.add_subparsers(dest="rve_command", required=True)
     gen = rsub.add_parser("generate", help="generate a packing from the [rve] table")
@@ -141,6 +149,20 @@ def main(argv: list[str] | None = None) -> int:
                             allow_changed=args.allow_changed,
                             progress=not args.quiet, threads=args.threads,
                             device=args.device, comm=comm)
+        if args.command == "check":
+            import json
+
+            import numba
+
+            from grainscale.config.case import load_case
+            from grainscale.coupling.dry_run import check, format_check
+
+            if args.threads:
+                numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+            report = check(load_case(args.case), args.dem_steps)
+            print(format_check(report))
+            print(json.dumps(report))
+            return 0
         if args.command == "rve":
             from grainscale.cli import rve
 
