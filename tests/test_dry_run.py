@@ -33,6 +33,10 @@ def test_check_predicts_the_runs_steps_and_dem_work(tmp_path, capsys):
     assert sand["dem_steps_per_step"] == pytest.approx(cost["dem_steps_per_rve_per_step"],
                                                        rel=0.25)
     assert not sand["dem_steps_assumed"] and r["dem_wall_seconds"] > 0
+    import grainscale as gs
+
+    again = gs.check(case)  # the Python API: the same figures but the timed ones
+    assert again["mpm_steps"] == r["mpm_steps"] and again["points"] == r["points"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["column.toml", "run"]
 
 

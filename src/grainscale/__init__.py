@@ -9,7 +9,8 @@ except PackageNotFoundError:  # running from a source tree without install
 
 # the Python API (docs/api.md), imported on first use so that `import grainscale` and the
 # command line stay light
-_API = ("Case", "ConfigError", "Result", "RunError", "load_case", "open_result", "run")
+_API = ("Case", "ConfigError", "Result", "RunError", "check", "load_case", "open_result",
+        "run")
 _MODULES = ("analysis", "blocks", "rve")  # grainscale.rve: the RVE alone; analysis:
 # reading and measuring outputs; blocks: the solver's parts for hand-built studies
 __all__ = ["__version__", *_MODULES, *_API]

@@ -289,4 +289,36 @@ def run(case: Case | str | Path, out: str | Path, *, max_steps: int | None = Non
     return Result(out)
 
 
-__all__ = ["Case", "ConfigError", "Result", "RunError", "load_case", "open_result", "run"]
+def check(case: Case | str | Path, dem_steps: float | None = None) -> dict:
+    """What a run of `case` would be, without running it (`grainscale check`): points and
+    RVEs per material, MPM and DEM steps, RVE memory and an estimate of the DEM's wall
+    time on this machine (coupling/dry_run.py; docs/case-files.md).
+
+    Parameters
+    ----------
+    case : Case or str or pathlib.Path
+        The case, or a case file's path.
+    dem_steps : float, optional
+        Assumed DEM steps per RVE and MPM step of quasi-static RVEs (default 6).
+
+    Returns
+    -------
+    dict
+        The figures `grainscale check` prints as JSON.
+
+    Raises
+    ------
+    ConfigError
+        For an invalid case, as `run` would.
+    """
+    from grainscale.coupling.dry_run import check as dry_run
+
+    if isinstance(case, (str, Path)):
+        case = load_case(case)
+    elif not isinstance(case, Case):
+        raise TypeError(f"case: a Case or a path, not {type(case).__name__}")
+    return dry_run(case, dem_steps)
+
+
+__all__ = ["Case", "ConfigError", "Result", "RunError", "check", "load_case", "open_result",
+           "run"]
