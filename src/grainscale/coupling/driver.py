@@ -56,10 +56,9 @@ from grainscale.mpm.step import MPMState, RemoteFailure, SimulationError, step
 
 
 # --------------------------------------------------------------------------- run
-def check_geometry(case: Case, case_dir: Path) -> list[Probe]:
-    """All checks of the solver set-up (points in the grid, boxes that select nodes, ...)
-    before the packings of DEM materials are generated, which can take minutes; returns
-    the points of the case's probes (coupling/probes.py)."""
+def stand_in_state(case: Case, case_dir: Path) -> MPMState:
+    """The solver's set-up of the case (grid, points, boundaries, probes' boxes: every
+    check it makes) with stand-in materials, so no packing is generated."""
     probe = case.model_copy(deep=True)
     for m in probe.materials.values():
         if m.type == "dem":
@@ -69,7 +68,14 @@ def check_geometry(case: Case, case_dir: Path) -> list[Probe]:
         return KINDS["linear_elastic"](name, len(x), density=1.0, youngs_modulus=1.0,
                                        poisson_ratio=0.0)
 
-    return resolve(case, build_state(probe, case_dir, material_factory=stand_in))
+    return build_state(probe, case_dir, material_factory=stand_in)
+
+
+def check_geometry(case: Case, case_dir: Path) -> list[Probe]:
+    """All checks of the solver set-up (points in the grid, boxes that select nodes, ...)
+    before the packings of DEM materials are generated, which can take minutes; returns
+    the points of the case's probes (coupling/probes.py)."""
+    return resolve(case, stand_in_state(case, case_dir))
 
 
 def set_threads(case: Case, threads: int | None, comm: Comm) -> None:

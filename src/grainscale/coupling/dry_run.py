@@ -39,23 +39,15 @@ QUASI_STATIC_DEM_STEPS = 6.0  # assumed DEM steps per RVE and MPM step (module d
 
 def _points_per_material(case: Case, case_dir: Path) -> tuple[dict[str, int], float]:
     """Material points of each material, from the solver's own set-up with stand-in
-    materials (no packing is made), and the grid's smallest cell [m]."""
-    from grainscale.mpm.materials import KINDS
-    from grainscale.mpm.setup import build_state
+    materials (driver.stand_in_state: every check a run makes before its packings, no
+    packing made; the probes resolved on it), and the grid's smallest cell [m]."""
+    from grainscale.coupling.driver import stand_in_state
+    from grainscale.coupling.probes import resolve
 
-    probe = case.model_copy(deep=True)
-    for m in probe.materials.values():
-        if m.type == "dem":
-            m.density = 1.0
-
-    def stand_in(name, cfg, x, local=None):
-        return KINDS["linear_elastic"](name, len(x), density=1.0, youngs_modulus=1.0,
-                                       poisson_ratio=0.0)
-
-    s = build_state(probe, case_dir, material_factory=stand_in)
-    out = {}
-    for mat, ids in zip(s.materials, s.mat_points, strict=True):
-        out[mat.name] = int(s.points.n if ids is None else len(ids))
+    s = stand_in_state(case, case_dir)
+    resolve(case, s)
+    out = {mat.name: int(s.points.n if ids is None else len(ids))
+           for mat, ids in zip(s.materials, s.mat_points, strict=True)}
     return out, float(min(np.min(np.diff(a)) for a in s.grid.node_axes() if len(a) > 1))
 
 
@@ -95,11 +87,8 @@ def _time_dem(params, rves: int, steps: int = 20) -> dict:
 
 def check(case: Case, dem_steps: float | None = None) -> dict:
     """The dry run's figures (module docstring) of a validated case."""
-    from grainscale.coupling.driver import check_geometry
-
     case = case.check()
     case_dir = case._case_dir or Path.cwd()
-    check_geometry(case, case_dir)
     counts, h_min = _points_per_material(case, case_dir)
     speeds, materials = [], {}
     for name, cfg in case.materials.items():
@@ -112,16 +101,16 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
         if timed:
             speeds.append(timed["wave_speed"])
         materials[name] = {"points": n, "type": "dem", "rves": n, "dem": timed,
-                           "time_integration": cfg.time_integration, "cfg": cfg}
+                           "time_integration": cfg.time_integration}
     c = max(speeds) if speeds else 0.0
     dt = case.solver.dt if case.solver.dt is not None else (
         case.solver.cfl * h_min / c if c > 0 else math.nan)
     steps = (case.time.end - case.time.start) / dt
     wall = 0.0
-    for m in materials.values():
+    for name, m in materials.items():
         if m["type"] != "dem" or not m["dem"]:
             continue
-        cfg, d = m.pop("cfg"), m["dem"]
+        cfg, d = case.materials[name], m["dem"]
         if m["time_integration"] == "dynamic":
             m["dem_steps_per_step"] = float(max(cfg.min_substeps,
                                                 math.ceil(dt / d["dt_crit"] - 1e-9)))
@@ -133,8 +122,6 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
                                  * d["wall_per_particle_step"])
         m["memory_bytes"] = m["rves"] * d["bytes_per_rve"]
         wall += m["dem_wall_seconds"]
-    for m in materials.values():
-        m.pop("cfg", None)
     return {"title": case.title, "points": sum(counts.values()), "h_min": h_min,
             "wave_speed": c, "dt": dt, "mpm_steps": steps, "materials": materials,
             "dem_wall_seconds": wall}
