@@ -13,6 +13,7 @@ from grainscale.cli import main
 
 sys.path.insert(0, str(Path(__file__).parent / "coupling"))
 from test_mpi import small_column  # noqa: E402
+from test_multiscale_run import run_folder_with_packings_of  # noqa: E402
 
 PARTS = ("mpm", "dem", "comm", "wait", "other", "total")
 
@@ -51,9 +52,7 @@ def test_a_run_stopped_by_an_error_at_its_third_step_reports_sanely(column, tmp_
     case["time"]["start"] = 0.0  # no geostatic stage: thrown from the first step
     thrown = tmp_path / "thrown.toml"
     thrown.write_text(tomli_w.dumps(case))
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "packings").symlink_to(ref / "packings", target_is_directory=True)
+    out = run_folder_with_packings_of(ref, tmp_path / "out")
     assert main(["run", str(thrown), "--out", str(out), "--quiet", "--threads", "1"]) == 1
     assert "left the grid" in capsys.readouterr().err
     r = json.loads((out / "cost.json").read_text())
@@ -67,9 +66,7 @@ def test_cost_is_cumulative_over_a_resume(column, tmp_path):
     steps, DEM steps per RVE and step, share of RVEs stepped: those of the uninterrupted
     run exactly, as the run is), `this_invocation` the resumed part's."""
     path, ref, full = column
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "packings").symlink_to(ref / "packings", target_is_directory=True)
+    out = run_folder_with_packings_of(ref, tmp_path / "out")
     common = ["run", str(path), "--out", str(out), "--quiet", "--threads", "1",
               "--checkpoint-every", "10"]
     assert main([*common, "--max-steps", "40"]) == 0

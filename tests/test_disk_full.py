@@ -16,7 +16,7 @@ from grainscale.io import faults
 from grainscale.io.checkpoint import read_checkpoint, write_checkpoint
 
 sys.path.insert(0, str(Path(__file__).parent / "coupling"))
-from test_multiscale_run import small_unit_element  # noqa: E402
+from test_multiscale_run import run_folder_with_packings_of, small_unit_element  # noqa: E402
 
 
 class FullDisk:
@@ -79,9 +79,7 @@ def test_a_full_disk_during_a_run_stops_it_with_one_line(unit_element, tmp_path,
     stderr naming the cause and the checkpoint to resume from; --resume, once there is
     room, gives the uninterrupted history to the byte."""
     case, ref, history = unit_element
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "packings").symlink_to(ref / "packings", target_is_directory=True)
+    out = run_folder_with_packings_of(ref, tmp_path / "out")
     cmd = [sys.executable, "-m", "grainscale", "run", str(case), "--out", str(out),
            "--quiet", "--checkpoint-every", "4"]
     env = {**__import__("os").environ, faults.ENV: f"{point}/ENOSPC"}

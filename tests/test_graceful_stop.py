@@ -16,6 +16,7 @@ from grainscale.io import faults
 
 sys.path.insert(0, str(Path(__file__).parent / "coupling"))
 from test_mpi import MPIEXEC, mpirun, small_column  # noqa: E402
+from test_multiscale_run import run_folder_with_packings_of  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -29,12 +30,6 @@ def column(tmp_path_factory):
     return case, ref, (ref / "history.csv").read_text()
 
 
-def fresh(ref: Path, out: Path) -> Path:
-    out.mkdir()
-    (out / "packings").symlink_to(ref / "packings", target_is_directory=True)
-    return out
-
-
 @pytest.mark.parametrize("sig", ["TERM", pytest.param("INT", marks=pytest.mark.validation),
                                  pytest.param("USR1", marks=pytest.mark.validation)])
 def test_a_signal_stops_at_the_next_step_with_a_checkpoint(column, tmp_path, capsys, sig):
@@ -43,7 +38,7 @@ def test_a_signal_stops_at_the_next_step_with_a_checkpoint(column, tmp_path, cap
     checkpoints every 2,000 steps), exits 3 and says where; --resume gives the uninterrupted
     history to the byte."""
     case, ref, history = column
-    out = fresh(ref, tmp_path / "out")
+    out = run_folder_with_packings_of(ref, tmp_path / "out")
     common = ["run", str(case), "--out", str(out), "--quiet", "--threads", "1"]
     faults.arm(f"step.advanced:31/{sig}")
     try:
@@ -64,7 +59,7 @@ def test_a_second_ctrl_c_stops_at_once(column, tmp_path):
     with a message). The checkpoint written before (step 20) is intact: --resume from it
     gives the uninterrupted history."""
     case, ref, history = column
-    out = fresh(ref, tmp_path / "out")
+    out = run_folder_with_packings_of(ref, tmp_path / "out")
 
     def twice(state):
         if state.step == 27:
@@ -85,7 +80,7 @@ def test_ranks_stop_together_when_one_is_signalled(column, tmp_path):
     ranks at different times): both stop at the same step (the ranks agree each step),
     the job exits 3, and a resume on 2 ranks gives the serial history to the byte."""
     case, ref, history = column
-    out = fresh(ref, tmp_path / "out")
+    out = run_folder_with_packings_of(ref, tmp_path / "out")
     common = ["run", str(case), "--out", str(out), "--quiet"]
     r = mpirun(2, common, env={faults.ENV: "step.advanced:31@1/TERM"})
     assert r.returncode == EXIT_STOPPED, r.stderr

@@ -34,6 +34,14 @@ def small_unit_element(tmp: Path, end: float, interval: float, **rve) -> Path:
     return path
 
 
+def run_folder_with_packings_of(ref: Path, out: Path) -> Path:
+    """A new run folder `out` whose packings are those of the run in `ref` (linked: no
+    run regenerates them)."""
+    out.mkdir()
+    (out / "packings").symlink_to(ref / "packings", target_is_directory=True)
+    return out
+
+
 @pytest.fixture(scope="module")
 def case_file(tmp_path_factory):
     return small_unit_element(tmp_path_factory.mktemp("ue"), end=0.012, interval=0.0004)

@@ -24,6 +24,7 @@ from grainscale.dem.generate import generate
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_mpi import small_column  # noqa: E402
+from test_multiscale_run import run_folder_with_packings_of  # noqa: E402
 
 DT = 2e-4  # s, the MPM step: a few DEM steps of the packing's dt_crit
 
@@ -214,9 +215,7 @@ def test_a_run_with_sleeping_rves_resumes_bitwise(tmp_path):
     ref = tmp_path / "full"
     assert main(["run", str(case), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
     history = (ref / "history.csv").read_text()
-    part = tmp_path / "part"
-    part.mkdir()
-    (part / "packings").symlink_to(ref / "packings", target_is_directory=True)
+    part = run_folder_with_packings_of(ref, tmp_path / "part")
     common = ["run", str(case), "--out", str(part), "--quiet", "--threads", "1",
               "--checkpoint-every", "10"]
     assert main([*common, "--max-steps", "47"]) == 0
