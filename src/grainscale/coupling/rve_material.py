@@ -355,13 +355,15 @@ class RVEMaterial:
         not accumulate (docs/coupling.md).
         - quasi_static RVEs: the increment over ceil(max |H_acc| / strain_per_substep)
           DEM steps of dt_crit;
-        - dynamic RVEs (sleeping): only an RVE at rest waits (`quiet`: its last update
-          left its grains near equilibrium and slow); one that is not is stepped every
-          step. A waking RVE that slept takes H_acc over whole DEM steps of this step's
-          dt_DEM lasting T = max(dt, min(t_acc, max|H_acc| d sqrt(rho_s / p) /
-          WAKE_INERTIAL)): its grains see the rate-independent regime's rate or slower,
-          or at most the macroscopic rate (T = t_acc, the slept time caught up). The slept
-          time is otherwise frozen: the grains' fluctuating motion resumes where it stood.
+        - dynamic RVEs (sleeping): only an RVE at rest or loose waits (`_quiet`: its
+          last update left its grains near equilibrium and slow, or its stress below
+          LOOSE p_prep); any other is stepped every step. A waking RVE that slept takes
+          H_acc over whole DEM steps of this step's dt_DEM lasting T = max(dt, min(t_acc,
+          max|H_acc| d sqrt(rho_s / p) / WAKE_INERTIAL)) (`_waking_steps`; a loose one's
+          limit its collisional stress): its grains see the rate-independent regime's
+          rate or slower, or at most the macroscopic rate (T = t_acc, the slept time
+          caught up). The slept time is otherwise frozen: the grains' fluctuating motion
+          resumes where it stood.
         """
         if dH.shape != (self.n_points, 3, 3):
             raise ValueError(f"dH of shape {dH.shape}: one (3, 3) increment per point of "
