@@ -18,6 +18,18 @@ read from the packing store) and a few DEM steps of it timed on this machine. Fr
 It is an estimate: the wave speed grows as the RVEs are compressed (more MPM steps),
 the MPM's own work is left out (2-10 % of a multiscale run's step, docs/performance.md
 §1.5), and adaptive updates or sleeping RVEs skip DEM steps (fewer).
+
+Warnings (`warnings`, each a sentence naming the key and what to change), for a case
+that is valid but likely not what its author wants (docs/guide.md):
+- one point per cell (`bodies[i].points_per_cell = 1`): a cell's stress is one sample,
+  and a point crossing a cell boundary jumps the grid forces (cell-crossing noise);
+- a body spanning fewer than MIN_CELLS_ACROSS cells along an axis in which the grid has
+  more: a GIMP point's weight reaches one cell beyond its own, so such a body has no
+  interior along that axis and its stress gradient (gravity's, a footing's) is not
+  resolved (a one-cell slice between walls, an axis of 1-2 cells, is not warned);
+- an RVE cell that retiles early: its packing's narrowest width W0 (mean diameters)
+  under RETILE_EARLY x `retile_width`, i.e. a stretch of W0 / retile_width (< 1.5)
+  across a face pair doubles the cell (8 x the spheres at most, `retile_max_factor`).
 """
 
 from __future__ import annotations
@@ -30,17 +42,23 @@ from pathlib import Path
 import numpy as np
 
 from grainscale.config.case import Case
+from grainscale.config.rve import min_particles
 from grainscale.dem import engine
+from grainscale.dem.cell import perpendicular_widths
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import concatenate
 
 QUASI_STATIC_DEM_STEPS = 6.0  # assumed DEM steps per RVE and MPM step (module docstring)
+MIN_CELLS_ACROSS = 4  # cells a body should span along an axis (module docstring)
+RETILE_EARLY = 1.5  # a packing narrower than this x retile_width retiles early
 
 
-def _points_per_material(case: Case, case_dir: Path) -> tuple[dict[str, int], float]:
+def _points_per_material(case: Case, case_dir: Path
+                         ) -> tuple[dict[str, int], float, list[str]]:
     """Material points of each material, from the solver's own set-up with stand-in
     materials (driver.stand_in_state: every check a run makes before its packings, no
-    packing made; the probes resolved on it), and the grid's smallest cell [m]."""
+    packing made; the probes resolved on it), the grid's smallest cell [m] and the
+    grid's warnings (module docstring)."""
     from grainscale.coupling.driver import stand_in_state
     from grainscale.coupling.probes import resolve
 
@@ -48,7 +66,36 @@ def _points_per_material(case: Case, case_dir: Path) -> tuple[dict[str, int], fl
     resolve(case, s)
     out = {mat.name: int(s.points.n if ids is None else len(ids))
            for mat, ids in zip(s.materials, s.mat_points, strict=True)}
-    return out, float(min(np.min(np.diff(a)) for a in s.grid.node_axes() if len(a) > 1))
+    axes = s.grid.node_axes()
+    return (out, float(min(np.min(np.diff(a)) for a in axes if len(a) > 1)),
+            _grid_warnings(case, s.points, axes))
+
+
+def _grid_warnings(case: Case, points, axes) -> list[str]:
+    """One point per cell, and bodies that span too few cells (module docstring)."""
+    warn = []
+    for i, body in enumerate(case.bodies):
+        if body.points_per_cell == 1:
+            warn.append(f"bodies[{i}].points_per_cell = 1: each cell's stress is one sample "
+                        "and points crossing cell boundaries make the grid forces jump; 2 "
+                        "(8 points a cell) is the usual choice")
+    for k, name in enumerate("xyz"):
+        cells = len(axes[k]) - 1
+        if cells < MIN_CELLS_ACROSS or (case.grid.periodic and name in case.grid.periodic):
+            continue
+        h = float(np.min(np.diff(axes[k])))
+        for m, mat in enumerate(case.materials):
+            sel = points.mat == m
+            if not sel.any():
+                continue
+            span = float(np.ptp(points.x[sel, k]) + 2 * points.lp[sel, k].max())
+            if span < MIN_CELLS_ACROSS * h * (1 - 1e-9):
+                warn.append(
+                    f"material {mat!r} spans {span / h:.3g} cells along {name} (grid.cell_size "
+                    f"{h:g} m): a GIMP point reaches one cell beyond its own, so the body has "
+                    f"no interior along {name} and its stress gradient is not resolved; "
+                    f"give it at least {MIN_CELLS_ACROSS} cells")
+    return warn
 
 
 def _continuum_wave_speed(cfg) -> float:
@@ -80,8 +127,9 @@ def _time_dem(params, rves: int, steps: int = 20) -> dict:
         t0 = time.perf_counter()
         engine.advance(batch, n, dt_crit, cp, ctrl)
         wall = time.perf_counter() - t0
+    width = float(perpendicular_widths(p0.h[0]).min() / (2 * p0.radius[0].mean()))
     return {"dt_crit": dt_crit, "wave_speed": c, "spheres": p0.n_particles,
-            "bytes_per_rve": rve_state_bytes(p0),
+            "bytes_per_rve": rve_state_bytes(p0), "width_in_diameters": width,
             "wall_per_particle_step": wall / (steps * batch.n_rve * p0.n_particles)}
 
 
@@ -89,7 +137,7 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
     """The dry run's figures (module docstring) of a validated case."""
     case = case.check()
     case_dir = case._case_dir or Path.cwd()
-    counts, h_min = _points_per_material(case, case_dir)
+    counts, h_min, warnings = _points_per_material(case, case_dir)
     speeds, materials = [], {}
     for name, cfg in case.materials.items():
         if cfg.type != "dem":
@@ -102,6 +150,13 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
             speeds.append(timed["wave_speed"])
         materials[name] = {"points": n, "type": "dem", "rves": n, "dem": timed,
                            "time_integration": cfg.time_integration}
+        if timed and 0 < timed["width_in_diameters"] < RETILE_EARLY * cfg.retile_width:
+            w = timed["width_in_diameters"]
+            warnings.append(
+                f"materials.{name}.retile_width = {cfg.retile_width:g}: the packing's cell is "
+                f"{w:.3g} mean diameters wide, so a stretch of {w / cfg.retile_width:.3g} "
+                "across a face pair doubles it (up to retile_max_factor x the spheres); "
+                "more rve.particles, or a smaller retile_width (docs/coupling.md)")
     c = max(speeds) if speeds else 0.0
     dt = case.solver.dt if case.solver.dt is not None else (
         case.solver.cfl * h_min / c if c > 0 else math.nan)
@@ -122,9 +177,13 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
                                  * d["wall_per_particle_step"])
         m["memory_bytes"] = m["rves"] * d["bytes_per_rve"]
         wall += m["dem_wall_seconds"]
+    rve = case.rve
+    smallest = min_particles(rve.radius_min, rve.radius_max,
+                             rve.preparation.initial_porosity, 3.0) if rve else None
     return {"title": case.title, "points": sum(counts.values()), "h_min": h_min,
             "wave_speed": c, "dt": dt, "mpm_steps": steps, "materials": materials,
-            "dem_wall_seconds": wall}
+            "dem_wall_seconds": wall, "smallest_valid_particles": smallest,
+            "warnings": warnings}
 
 
 def format_check(r: dict) -> str:
@@ -143,6 +202,10 @@ def format_check(r: dict) -> str:
             f"as much before compression); DEM step {d['dt_crit']:.3g} s, "
             f"{m['dem_steps_per_step']:.3g} DEM steps per RVE and MPM step ({how}); "
             f"{1e9 * d['wall_per_particle_step']:.3g} ns per particle-step here")
+        lines.append(f"    the packing's cell is {d['width_in_diameters']:.3g} mean diameters "
+                     f"wide; rve.particles must be at least {r['smallest_valid_particles']} "
+                     "for these radii")
     lines.append(f"estimated DEM wall time on this machine: {r['dem_wall_seconds'] / 3600:.3g} h "
                  "(an estimate: docs/case-files.md, grainscale check)")
+    lines += [f"warning: {w}" for w in r["warnings"]]
     return "\n".join(lines)
