@@ -14,8 +14,13 @@
         replays the recorded dH of the most sheared points on their RVEs taken at
         release: as run, rebuilt from positions (tangential history restarts, the
         control for supercells), as n x n x n supercells (the same grains n^3 times,
-        --tiles 2 3) and with retiling, and prints the median mobilised friction of
-        each over 0.5-2.5 tau_c.
+        --tiles 2 3), with retiling, and on packings generated at other sizes
+        (--packings P.h5 ...: `fresh N`, each point taking them in turn, and their
+        supercells `fresh N nxnxn`; they start from
+        their preparation's isotropic state, not the column's geostatic one, so
+        `--packings` with the run's own packings, OUT/packings/*.h5, is their control),
+        and prints the median mobilised friction of each over 0.5-2.5 tau_c
+        (--variants selects).
 
 The replay is the MPM's exact deformation history without the MPM: the RVE's answer
 to it depends only on the RVE, so differences between the variants are the cell's.
@@ -106,14 +111,17 @@ def record(case: Path, out: Path, until: float) -> None:
     print(f"recorded {len(rec['dt'])} steps after release into {out}")
 
 
-def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
+def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0,
+           packings: list[Path] = (), only: list[str] | None = None) -> None:
     from grainscale.blocks import (
         STATE_FIELDS,
         RVEMaterial,
         SimulationError,
         from_packing,
         from_state_arrays,
+        read_rve_state,
     )
+    from grainscale.config.rve import RVEParams
 
     rec = np.load(out / "record.npz")
     snap = dict(np.load(out / "snapshot.npz"))
@@ -128,17 +136,18 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
     points = loaded[np.argsort(shear[loaded])[::-1][skip:skip + n_points]]
     one = from_state_arrays({k: snap[k][points] for k in STATE_FIELDS})
 
-    def supercell(r, n):
-        h = one.h[r]
-        x = one.s[r] @ h.T
+    def supercell(r, n, cell=None):  # n x n x n copies of RVE r of `cell` (the snapshot)
+        src, k = (one, r) if cell is None else (cell, 0)
+        h = src.h[k]
+        x = src.s[k] @ h.T
         shifts = np.array([[i, j, k] for i in range(n) for j in range(n) for k in range(n)],
                           float)
         big = from_packing(n * h, np.concatenate([x + s @ h.T for s in shifts]),
-                           np.tile(one.radius[r], n**3), params.density)
+                           np.tile(src.radius[k], n**3), params.density)
         rng = np.random.default_rng(r)  # break the copies' symmetry, far below the noise
-        big.v[0] = np.tile(one.v[r], (n**3, 1)) + 1e-9 * rng.standard_normal(big.v[0].shape)
-        big.w[0] = np.tile(one.w[r], (n**3, 1))
-        big.h0[0] = n * one.h0[r]
+        big.v[0] = np.tile(src.v[k], (n**3, 1)) + 1e-9 * rng.standard_normal(big.v[0].shape)
+        big.w[0] = np.tile(src.w[k], (n**3, 1))
+        big.h0[0] = n * src.h0[k]
         return big
 
     def alone(r):  # the same state rebuilt from positions (contact history restarts)
@@ -146,8 +155,15 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
         b.v[0], b.w[0], b.h0[0] = one.v[r], one.w[r], one.h0[r]
         return b
 
-    def run(batch, p, retile_width=0.0):
-        mat = RVEMaterial("replay", params, [batch], 1, retile_width=retile_width)
+    fresh = {}  # packings generated at their size, one per point in turn: N -> [(batch, params)]
+    for f in packings:
+        batch, stored = read_rve_state(f)
+        if stored is None:
+            raise SystemExit(f"{f}: no [rve] parameters stored with the packing")
+        fresh.setdefault(batch.radius.shape[1], []).append((batch, RVEParams(**stored)))
+
+    def run(batch, p, retile_width=0.0, rve_params=params):
+        mat = RVEMaterial("replay", rve_params, [batch], 1, retile_width=retile_width)
         mat.groups, mat.dt_crit = [batch], float(snap["dt_crit"])
         sig = mat.initial_stress()
         out_sig = []
@@ -161,14 +177,26 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0) -> None:
 
     variants = {"as run": lambda r: one.take([r]), "rebuilt": alone,
                 **{f"{n}x{n}x{n}": (lambda r, n=n: supercell(r, n)) for n in tiles},
-                "retiled": lambda r: one.take([r])}
+                "retiled": lambda r: one.take([r]),
+                **{f"fresh {n}": (lambda r, n=n: fresh[n][r % len(fresh[n])]) for n in fresh},
+                **{f"fresh {n} {m}x{m}x{m}": (lambda r, n=n, m=m: (
+                    supercell(r, m, fresh[n][r % len(fresh[n])][0]),
+                    fresh[n][r % len(fresh[n])][1])) for n in fresh for m in tiles}}
+    if only:
+        unknown = sorted(set(only) - set(variants))
+        if unknown:
+            raise SystemExit(f"--variants {unknown}: not among {list(variants)}")
+        variants = {k: v for k, v in variants.items() if k in only}
     print(f"points {points.tolist()}; median phi_mob [deg] and p [Pa] over 0.5-2.5 tau_c")
     print(f"{'point':>5} " + " ".join(f"{v:>16}" for v in variants))
     table = {v: [] for v in variants}
     for r, p in enumerate(points):
         cells = []
         for name, make in variants.items():
-            s = run(make(r), p, retile_width=4.0 if name == "retiled" else 0.0)
+            made = make(r)
+            batch, rve_params = made if isinstance(made, tuple) else (made, params)
+            s = run(batch.take([0]), p, retile_width=4.0 if name == "retiled" else 0.0,
+                    rve_params=rve_params)
             w = window[:len(s)]
             mu = float(np.median(mobilised(s[w])))
             table[name].append(mu)
@@ -240,6 +268,12 @@ def main() -> None:
     p.add_argument("--skip", type=int, default=0, help="skip the most sheared SKIP points")
     p.add_argument("--tiles", type=int, nargs="+", default=[2],
                    help="supercells of n x n x n copies (n >= 2)")
+    p.add_argument("--packings", type=Path, nargs="+", default=[],
+                   help="packings (.h5 state, `grainscale rve generate`) generated at other "
+                        "sizes: a variant `fresh N` per size N, the points taking them in turn")
+    p.add_argument("--variants", nargs="+",
+                   help="run only these variants (as run, rebuilt, NxNxN, retiled, fresh N, "
+                        "fresh N NxNxN)")
     a = ap.parse_args()
     if a.command == "frames":
         frames(a.out)
@@ -248,7 +282,7 @@ def main() -> None:
     elif a.command == "compare":
         compare(a.out, a.table, a.window)
     else:
-        replay(a.out, a.points, a.tiles, a.skip)
+        replay(a.out, a.points, a.tiles, a.skip, a.packings, a.variants)
 
 
 if __name__ == "__main__":

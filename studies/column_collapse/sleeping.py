@@ -2,15 +2,17 @@
 
     python studies/column_collapse/sleeping.py run --out DIR [--tolerance 1e-6]
         [--max-deferred 20] [--cfl-offset 0] [--threads N] [--case quick.toml]
+        [--velocity-update apic]
     python studies/column_collapse/sleeping.py compare RUN [RUN ...] [--after 3]
 
 `run`: the case (default examples/column_collapse/quick.toml) with sleeping RVEs
 (materials.sand.update_tolerance, max_deferred_steps; --tolerance 0: every RVE every
 step, the case as shipped) and the cost columns (dem_steps_per_rve, updates_per_rve) in
 its history, cfl times (1 + --cfl-offset) (a round-off realisation: 1e-9 and -1e-9 give
-the realisations of §2.3), into DIR; resumed from DIR's newest checkpoint where it holds
-one. `compare`: per run, studies/column_spread.py's measures at the last row (front, 99 %
-and 95 % of the mass, H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
+the realisations of §2.3), with APIC where --velocity-update apic, into DIR; resumed from
+DIR's newest checkpoint where it holds one. `compare`: per run,
+studies/column_spread.py's measures at the last row (front, 99 % and 95 % of the mass,
+H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
 share of RVEs stepped, over the run and after --after tau_c (from the history's
 cumulative cost columns; cost.json covers one invocation). The last line is one JSON
 object.
@@ -36,9 +38,17 @@ QUICK = ROOT / "examples" / "column_collapse" / "quick.toml"
 COST = ["dem_steps_per_rve", "updates_per_rve"]
 
 
-def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: float
-                  ) -> gs.Case:
+def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: float,
+                  velocity_update: str | None = None) -> gs.Case:
     c = gs.load_case(case)
+    if velocity_update == "apic":  # APIC has no relaxation time: the table rebuilt
+        keep = c.solver.model_dump(exclude_unset=True)
+        keep.pop("velocity_relaxation_time", None)
+        c.solver = type(c.solver)(**{**keep, "velocity_update": "apic"})
+        c.title += ", APIC"
+    elif velocity_update is not None and velocity_update != c.solver.velocity_update:
+        raise SystemExit(f"--velocity-update {velocity_update}: the case has "
+                         f"{c.solver.velocity_update!r}; only 'apic' is substituted")
     for m in c.materials.values():
         if m.type == "dem":
             m.update_tolerance = tolerance
@@ -51,7 +61,8 @@ def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: f
 
 
 def run(args) -> None:
-    case = sleeping_case(args.case, args.tolerance, args.max_deferred, args.cfl_offset).check()
+    case = sleeping_case(args.case, args.tolerance, args.max_deferred, args.cfl_offset,
+                         args.velocity_update).check()
     resume = any((args.out / n).is_file() for n in ("checkpoint.h5", "checkpoint.prev.h5"))
     gs.run(case, args.out, resume=resume, threads=args.threads)
 
@@ -96,6 +107,8 @@ def main() -> None:
     r.add_argument("--tolerance", type=float, default=1e-6)
     r.add_argument("--max-deferred", type=int, default=20)
     r.add_argument("--cfl-offset", type=float, default=0.0)
+    r.add_argument("--velocity-update", choices=["apic", "aflip"],
+                   help="apic: the case with APIC (no relaxation time) instead of its own")
     r.add_argument("--threads", type=int)
     c = sub.add_parser("compare")
     c.add_argument("runs", type=Path, nargs="+")

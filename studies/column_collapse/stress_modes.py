@@ -1,0 +1,67 @@
+"""How the weight of a column at rest is shared between its points: layer means
+against the lithostatic stress, and the median stress of each sub-cell position.
+
+    python studies/column_collapse/stress_modes.py RUN [--frames 1 -1] [--behind 0.05]
+
+For the points initially behind x = --behind (the part of the column that stays at
+rest), per frame: the vertical stress sigma_zz (compression positive) of each 1-cell
+layer, its mean against rho_bulk g (top - z) (the weight above: the layer means must
+carry it) and its 10/50/90th percentiles; and the median sigma_zz of the points by
+their initial sub-cell position (x, z parity of their position in half cells: with
+2 x 2 x 2 points a cell, which of the cell's points it was). A smooth field has equal
+medians; a field whose cells carry the weight on some of their points only (an
+intra-cell stress mode: the cell's nodal forces do not see how its points share the
+stress) has medians apart by the layer's stress.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+from pathlib import Path
+
+import numpy as np
+
+import grainscale as gs
+from grainscale.analysis import read_frame
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--frames", type=int, nargs="+", default=[1, -1],
+                    help="frame indices (Python's: -1 the last)")
+    ap.add_argument("--behind", type=float, default=0.05, help="m: points initially behind")
+    args = ap.parse_args()
+    case = gs.open_result(args.run).case
+    h = case.grid.cell_size if np.isscalar(case.grid.cell_size) else case.grid.cell_size[0]
+    n = next(b.points_per_cell for b in case.bodies)
+    g = float(np.linalg.norm(case.solver.gravity))
+    frames = sorted(glob.glob(str(args.run / "frames" / "frame_*.vtu")))
+    _, first = read_frame(frames[0])
+    x0 = first["position"]
+    sel = x0[:, 0] < args.behind
+    sub = np.floor(x0 / (h / n)).astype(int) % n  # the point's place within its cell
+    for k in args.frames:
+        _, d = read_frame(frames[k])
+        x, szz = d["position"], -d["stress"].reshape(-1, 3, 3)[:, 2, 2]
+        rho = None
+        if "porosity" in d:
+            rho = case.rve.density * (1 - float(np.median(d["porosity"][sel])))
+        print(f"{Path(frames[k]).name}: points initially behind x = {args.behind} m")
+        top = float((x[sel, 2] + 0.5 * h / n).max())
+        for z in np.arange(0.0, top, h):
+            lay = sel & (x[:, 2] >= z) & (x[:, 2] < z + h)
+            if not lay.any():
+                continue
+            lith = f"{rho * g * (top - z - 0.5 * h):7.1f}" if rho else "    -"
+            q = np.percentile(szz[lay], [10, 50, 90])
+            print(f"  z {z:.3f}-{z + h:.3f} m: {lay.sum():3d} points, mean {szz[lay].mean():7.1f} "
+                  f"Pa (weight above {lith}), 10/50/90 % {q[0]:7.1f} {q[1]:7.1f} {q[2]:7.1f}")
+        print("  median sigma_zz by sub-cell (x, z):", ", ".join(
+            f"({i}, {j}) {np.median(szz[sel & (sub[:, 0] == i) & (sub[:, 2] == j)]):.1f}"
+            for i in range(n) for j in range(n)))
+
+
+if __name__ == "__main__":
+    main()
