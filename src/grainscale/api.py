@@ -299,7 +299,7 @@ def check(case: Case | str | Path, dem_steps: float | None = None) -> dict:
     case : Case or str or pathlib.Path
         The case, or a case file's path.
     dem_steps : float, optional
-        Assumed DEM steps per RVE and MPM step of quasi-static RVEs (default 6).
+        Assumed DEM steps per RVE and MPM step of quasi-static RVEs (default 4.6).
 
     Returns
     -------

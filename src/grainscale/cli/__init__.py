@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="numba threads for the timed DEM steps (default: as a run)")
     check.add_argument("--dem-steps", type=float, default=None,
                        help="assumed DEM steps per RVE and MPM step of quasi-static RVEs "
-                            "(default 6)")
+                            "(default 4.6)")
 
     rve = sub.add_parser("rve", help="pure DEM work on one periodic RVE")
     rsub = rve.add_subparsers(dest="rve_command", required=True)
