@@ -50,32 +50,39 @@ def test_check_refuses_bad_input_as_a_run_does(tmp_path, capsys):
 
 def test_check_warns_of_a_valid_case_its_author_likely_does_not_want(tmp_path):
     """The reduced column warns: its body spans 3 of the grid's 4 cells in z (GIMP leaves
-    it no interior), one point per cell, and retile_width 20 against a packing ~5
-    diameters wide (it retiles at once). The same column 4 cells tall, with 2 points a
-    cell and retile_width 0 warns of nothing: each warning is tied to its own key."""
+    it no interior), one point per cell in a flow (dynamic RVEs), and retile_width 20
+    against a packing ~5 diameters wide (it retiles at once); with quasi-static RVEs one
+    point a cell is not warned. The same column 4 cells tall, with retile_width 0, warns
+    of nothing: each warning is tied to its own key."""
     import tomllib
-
-    import tomli_w
 
     import grainscale as gs
 
     case = small_column(tmp_path)
     data = tomllib.loads(case.read_text())
     data["bodies"][0]["points_per_cell"] = 1
-    case.write_text(tomli_w.dumps(data))
-    warn = gs.check(case)["warnings"]
+    warn = gs.check(_write(case, data))["warnings"]
     assert len(warn) == 3, warn
-    assert any(w.startswith("bodies[0].points_per_cell = 1") for w in warn)
+    assert any(w.startswith("bodies[0].points_per_cell = 1 in a flow") for w in warn)
     assert any("spans 3 cells along z" in w for w in warn)
     assert any(w.startswith("materials.sand.retile_width = 20") for w in warn)
-    data["bodies"][0].update(points_per_cell=2, hi=[0.04, 0.01, 0.04])
+    data["materials"]["sand"]["time_integration"] = "quasi_static"  # static: 1 is fine
+    static = gs.check(_write(case, data))["warnings"]
+    assert len(static) == 2 and not any("points_per_cell" in w for w in static)
+    data["bodies"][0].update(hi=[0.04, 0.01, 0.04])
     data["materials"]["sand"]["retile_width"] = 0.0
-    case.write_text(tomli_w.dumps(data))
-    r = gs.check(case)
+    r = gs.check(_write(case, data))
     assert r["warnings"] == []
     least = r["smallest_valid_particles"]  # the number the check refuses below
     assert least <= 80
     data["rve"]["particles"] = least - 1
-    case.write_text(tomli_w.dumps(data))
+    _write(case, data)
     with pytest.raises(gs.ConfigError, match=f"rve.particles >= {least}"):
         gs.check(case)
+
+
+def _write(path: Path, data: dict) -> Path:
+    import tomli_w
+
+    path.write_text(tomli_w.dumps(data))
+    return path
