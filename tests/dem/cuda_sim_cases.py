@@ -525,7 +525,7 @@ def kernel_cases(parts: list[str], res: dict) -> None:
 
 
 def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
-    """Sections 1, 2, 7, 9 and 10."""
+    """Sections 1, 2, 7, 9, 10, 11 and 14."""
     # 1. shear with a normal-stress servo through list rebuilds, per-RVE step counts
     cpu, gpu = base.copy(), base.copy()
     engine.advance(cpu, SHEAR_STEPS, dt, p, ctrl)
@@ -566,6 +566,54 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
     t0 = time.perf_counter()
     res["blocks"] = more_rves_than_blocks(base, p, dt)
     res["blocks"]["seconds"] = time.perf_counter() - t0
+
+    # 14. the device batch's bookkeeping: build, constants, remove, means, NaN flags
+    res["units"] = device_units(base)
+
+
+def device_units(base: RVEBatch) -> dict:
+    """Section 14 (fast): the device batch's bookkeeping without stepping. A batch built
+    on the device from a library of two packings by an unsorted assignment (its lean
+    host rows, device arrays and per-RVE constants against the batch concatenated on
+    the host), rows removed (against state.remove_rves: the order, the moved rows and
+    their constants), the mean accumulated rotation (against the host's mean over each
+    row, rot made distinct per sphere), and the not-finite flags with a NaN in one RVE's
+    stress and an infinity in another's spins."""
+    lib = [base.take([0]), base.take([1])]
+    rng = np.random.default_rng(7)
+    for b in lib:
+        b.rot[:] = rng.uniform(0.0, 2.0, b.rot.shape)
+    asg = np.array([1, 0, 1, 1, 0])
+    k = longest_row(lib) + 1
+    ref = concatenate([with_capacity(lib[i].copy(), k) for i in asg])
+    built = DeviceBatch.from_library(lib, asg, k)
+    everything = np.arange(len(asg))
+    res = {"build": _same(built.take(everything), ref),
+           "host_rows": _same(built.host, ref, ("h", "stress", "stiffness", "ncontact",
+                                                "unbalanced", "kinetic", "n_particles")),
+           "constants_differ": bool(any(not np.array_equal(v[0], v[1]) for v in
+                                        rve_constants(concatenate(lib)).values()))}
+    ref_c = rve_constants(ref)
+    res["constants"] = {key: bool(np.array_equal(v, ref_c[key]))
+                        for key, v in built.constants.items()}
+    mean = built.mean_rotation()
+    res["mean_rotation"] = rel(ref.rot.mean(axis=1), mean)
+    order = built.remove([0, 2])
+    kept, order_host = remove_rves(ref.copy(), [0, 2])
+    res["removed"] = {"order": bool(np.array_equal(order, order_host)),
+                      **_same(built.take(np.arange(built.n_rve)), kept),
+                      "host_rows": all(_same(built.host, kept, ("h", "stress",
+                                                                "n_particles")).values())}
+    kept_c = rve_constants(kept)
+    res["constants_after_remove"] = {key: bool(np.array_equal(v, kept_c[key]))
+                                     for key, v in built.constants.items()}
+    clean = built.not_finite().tolist()
+    bad = DeviceBatch(ref.copy())
+    bad.host.stress[1, 2, 0] = np.nan
+    bad.host.w[3, 5, 1] = np.inf
+    bad.push()
+    res["not_finite"] = [clean, bad.not_finite().tolist()]
+    return res
 
 
 def more_cases(base, p, dt, ctrl, still, res) -> None:

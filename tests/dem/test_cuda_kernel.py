@@ -10,7 +10,8 @@ per shape and blocks running several RVEs in the fast tier, the other kernel cas
 shrunk coupled runs (one or two RVEs of 90 spheres, 5-10 MPM steps) in the validation
 tier (minutes: the simulator runs each GPU thread as a Python thread). The same cases
 run once more without the simulator when a subprocess can launch a CUDA kernel (skipped
-otherwise, as on machines without a GPU; on an H100 all pass, docs/performance.md).
+otherwise, as on machines without a GPU; on an H100 all pass, docs/performance.md); the
+simulator itself runs anywhere, so a simulator that cannot run a kernel fails them.
 """
 
 from __future__ import annotations
@@ -110,6 +111,9 @@ def _cases(mode: str, *parts: str) -> dict:
                            text=True, cwd=HERE, timeout=300)
     if probe.returncode != 0:
         why = [ln for ln in probe.stderr.splitlines() if "Error" in ln][-1:] or ["?"]
+        if mode == "simulator":  # numba's simulator runs anywhere: its failure is ours
+            pytest.fail(f"numba's CUDA simulator cannot run a kernel ({why[0]}): "
+                        f"{probe.stderr[-2000:]}")
         pytest.skip(f"{mode}: numba.cuda cannot run a kernel here ({why[0]})")
     proc = _AHEAD.pop(parts, None) if mode == "simulator" else None
     proc = proc or _start(parts, simulator=mode == "simulator")
@@ -191,6 +195,25 @@ def test_device_runs_are_bitwise_reproducible(sim_long):
     # the simulator interleaves its threads freely, so this also covers the order of
     # the integer atomics of the reverse list (sorted before use)
     assert sim_long["bitwise_rerun"]
+
+
+def test_device_batch_bookkeeping(sim):
+    """device_batch.DeviceBatch without stepping (cuda_sim_cases.device_units): built
+    from a library by an unsorted assignment, bitwise the host's concatenation (device
+    arrays, lean host rows, per-RVE constants of two packings that differ); rows
+    removed as state.remove_rves removes them (order, rows, constants); the mean
+    rotation the host's mean over each row to round-off (another summation order; a
+    mean over n - 1 is off by 1/n = 4 %); the not-finite flags on exactly the RVEs with
+    a NaN in the stress and an infinity in the spins."""
+    res = sim["units"]
+    assert res["constants_differ"]  # else an indexing mistake could not show
+    assert all(res["build"].values()), res["build"]
+    assert all(res["host_rows"].values()), res["host_rows"]
+    assert all(res["constants"].values()), res["constants"]
+    assert res["mean_rotation"] < 1e-14
+    assert all(res["removed"].values()), res["removed"]
+    assert all(res["constants_after_remove"].values()), res["constants_after_remove"]
+    assert res["not_finite"] == [[False] * 3, [False, True, False, True, False]]
 
 
 def test_capacity_overflow_is_regrown_by_engine(sim):
