@@ -2,14 +2,15 @@
 
     python studies/column_collapse/sleeping.py run --out DIR [--tolerance 1e-6]
         [--max-deferred 20] [--cfl-offset 0] [--threads N] [--case quick.toml]
-        [--velocity-update apic]
+        [--velocity-update apic] [--particles N]
     python studies/column_collapse/sleeping.py compare RUN [RUN ...] [--after 3]
 
 `run`: the case (default examples/column_collapse/quick.toml) with sleeping RVEs
 (materials.sand.update_tolerance, max_deferred_steps; --tolerance 0: every RVE every
 step, the case as shipped) and the cost columns (dem_steps_per_rve, updates_per_rve) in
 its history, cfl times (1 + --cfl-offset) (a round-off realisation: 1e-9 and -1e-9 give
-the realisations of §2.3), with APIC where --velocity-update apic, into DIR; resumed from
+the realisations of §2.3), with APIC where --velocity-update apic, RVEs of --particles
+spheres where given, into DIR; resumed from
 DIR's newest checkpoint where it holds one. `compare`: per run,
 studies/column_spread.py's measures at the last row (front, 99 % and 95 % of the mass,
 H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
@@ -39,8 +40,12 @@ COST = ["dem_steps_per_rve", "updates_per_rve"]
 
 
 def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: float,
-                  velocity_update: str | None = None) -> gs.Case:
+                  velocity_update: str | None = None, particles: int | None = None
+                  ) -> gs.Case:
     c = gs.load_case(case)
+    if particles is not None:  # RVEs of another size, generated at it
+        c.rve.particles = particles
+        c.title += f", RVEs of {particles} spheres"
     if velocity_update == "apic":  # APIC has no relaxation time: the table rebuilt
         keep = c.solver.model_dump(exclude_unset=True)
         keep.pop("velocity_relaxation_time", None)
@@ -62,7 +67,7 @@ def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: f
 
 def run(args) -> None:
     case = sleeping_case(args.case, args.tolerance, args.max_deferred, args.cfl_offset,
-                         args.velocity_update).check()
+                         args.velocity_update, args.particles).check()
     resume = any((args.out / n).is_file() for n in ("checkpoint.h5", "checkpoint.prev.h5"))
     gs.run(case, args.out, resume=resume, threads=args.threads)
 
@@ -109,6 +114,8 @@ def main() -> None:
     r.add_argument("--cfl-offset", type=float, default=0.0)
     r.add_argument("--velocity-update", choices=["apic", "aflip"],
                    help="apic: the case with APIC (no relaxation time) instead of its own")
+    r.add_argument("--particles", type=int,
+                   help="the case's RVEs at this size ([rve] particles), generated at it")
     r.add_argument("--threads", type=int)
     c = sub.add_parser("compare")
     c.add_argument("runs", type=Path, nargs="+")
