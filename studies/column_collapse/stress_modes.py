@@ -2,7 +2,8 @@
 against the lithostatic stress, and the median stress of each sub-cell position.
 
     python studies/column_collapse/stress_modes.py RUN [--frames 1 -1] [--behind 0.05]
-    python studies/column_collapse/stress_modes.py DIR --mohr-coulomb [--frames -1]
+    python studies/column_collapse/stress_modes.py DIR --geostatic {rve,mohr-coulomb}
+        [--shape GIMP|linear] [--frames -1]
 
 For the points initially behind x = --behind (the part of the column that stays at
 rest), per frame: the vertical stress sigma_zz (compression positive) of each 1-cell
@@ -14,9 +15,10 @@ medians; a field whose cells carry the weight on some of their points only (an
 intra-cell stress mode: the cell's nodal forces do not see how its points share the
 stress) has medians apart by the layer's stress.
 
---mohr-coulomb first runs the control into DIR: quick.toml's geostatic stage (to t = 0)
-with a Mohr-Coulomb continuum (phi 22 deg, E = 19 MPa, about the RVE's P-wave modulus,
-nu 0.3, 1500 kg/m3) instead of the RVEs, on the same grid and points (~1 min).
+--geostatic first runs quick.toml's geostatic stage (to t = 0) into DIR, with its RVEs
+(~2 min on one core) or with a Mohr-Coulomb continuum (phi 22 deg, E = 19 MPa, about
+the RVE's P-wave modulus, nu 0.3, 1500 kg/m3; ~1 min) on the same grid and points, with
+GIMP or linear shape functions (--shape).
 """
 
 from __future__ import annotations
@@ -33,15 +35,19 @@ from grainscale.analysis import read_frame
 QUICK = Path(__file__).resolve().parents[2] / "examples" / "column_collapse" / "quick.toml"
 
 
-def mohr_coulomb_control(out: Path) -> None:
-    """quick.toml's geostatic stage with a Mohr-Coulomb continuum (module docstring)."""
+def geostatic(out: Path, material: str, shape: str) -> None:
+    """quick.toml's geostatic stage with its RVEs or a Mohr-Coulomb continuum (module
+    docstring)."""
     c = gs.load_case(QUICK)
-    c.materials = {"sand": {"type": "mohr_coulomb", "density": 1500.0,
-                            "youngs_modulus": 19e6, "poisson_ratio": 0.3,
-                            "friction_angle": 22.0}}
-    c.output.history = ["time", "kinetic_energy"]
-    c.output.column = None
+    if material == "mohr-coulomb":
+        c.materials = {"sand": {"type": "mohr_coulomb", "density": 1500.0,
+                                "youngs_modulus": 19e6, "poisson_ratio": 0.3,
+                                "friction_angle": 22.0}}
+        c.output.history = ["time", "kinetic_energy"]
+        c.output.column = None
+    c.solver.shape = shape
     c.output.frame_interval = 0.01
+    c.output.checkpoint_every = 0
     c.time.end = 0.0
     gs.run(c.check(), out, progress=False)
 
@@ -52,11 +58,13 @@ def main() -> None:
     ap.add_argument("--frames", type=int, nargs="+", default=[1, -1],
                     help="frame indices (Python's: -1 the last)")
     ap.add_argument("--behind", type=float, default=0.05, help="m: points initially behind")
-    ap.add_argument("--mohr-coulomb", action="store_true",
-                    help="run the Mohr-Coulomb control into RUN first")
+    ap.add_argument("--geostatic", choices=["rve", "mohr-coulomb"],
+                    help="run quick.toml's geostatic stage into RUN first")
+    ap.add_argument("--shape", choices=["GIMP", "linear"], default="GIMP",
+                    help="shape functions of that run")
     args = ap.parse_args()
-    if args.mohr_coulomb:
-        mohr_coulomb_control(args.run)
+    if args.geostatic:
+        geostatic(args.run, args.geostatic, args.shape)
     case = gs.open_result(args.run).case
     h = case.grid.cell_size if np.isscalar(case.grid.cell_size) else case.grid.cell_size[0]
     n = next(b.points_per_cell for b in case.bodies)
