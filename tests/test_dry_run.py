@@ -20,7 +20,8 @@ def test_check_predicts_the_runs_steps_and_dem_work(tmp_path, capsys):
     of cost.json's (the same ceil(dt / dt_crit) at the estimated dt); it makes no output
     folder."""
     case = small_column(tmp_path)
-    assert main(["check", str(case)]) == 0
+    resolved = tmp_path / "resolved.toml"
+    assert main(["check", str(case), "--resolved", str(resolved)]) == 0
     out = capsys.readouterr().out
     r = json.loads(out.strip().splitlines()[-1])
     assert "MPM steps to the end" in out and "estimated DEM wall time" in out
@@ -37,7 +38,13 @@ def test_check_predicts_the_runs_steps_and_dem_work(tmp_path, capsys):
 
     again = gs.check(case)  # the Python API: the same figures but the timed ones
     assert again["mpm_steps"] == r["mpm_steps"] and again["points"] == r["points"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["column.toml", "run"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["column.toml", "resolved.toml", "run"]
+    # the resolved case is the run's but for the bulk density its packings set
+    import tomllib
+
+    ran = tomllib.loads((ref / "case.resolved.toml").read_text())
+    assert ran["materials"]["sand"].pop("density") > 0
+    assert tomllib.loads(resolved.read_text()) == ran
 
 
 def test_check_refuses_bad_input_as_a_run_does(tmp_path, capsys):

@@ -72,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--dem-steps", type=float, default=None,
                        help="assumed DEM steps per RVE and MPM step of quasi-static RVEs "
                             "(default 4.6)")
+    check.add_argument("--resolved", type=Path, default=None,
+                       help="also write the resolved case (every default filled in, as a "
+                            "run's case.resolved.toml) to this file; - for the terminal")
 
     rve = sub.add_parser("rve", help="pure DEM work on one periodic RVE")
     rsub = rve.add_subparsers(dest="rve_command", required=True)
@@ -159,7 +162,16 @@ def main(argv: list[str] | None = None) -> int:
 
             if args.threads:
                 numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
-            report = check(load_case(args.case), args.dem_steps)
+            case = load_case(args.case)
+            report = check(case, args.dem_steps)
+            if args.resolved is not None:
+                from grainscale.config.base import resolved_toml
+
+                text = resolved_toml(case.check())
+                if str(args.resolved) == "-":
+                    print(text)
+                else:
+                    args.resolved.write_text(text)
             print(format_check(report))
             print(json.dumps(report))
             return 0
