@@ -116,12 +116,12 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0,
     from grainscale.blocks import (
         STATE_FIELDS,
         RVEMaterial,
+        RVEParams,
         SimulationError,
         from_packing,
         from_state_arrays,
         read_rve_state,
     )
-    from grainscale.config.rve import RVEParams
 
     rec = np.load(out / "record.npz")
     snap = dict(np.load(out / "snapshot.npz"))
