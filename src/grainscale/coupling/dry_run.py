@@ -217,7 +217,11 @@ def format_check(r: dict) -> str:
         lines.append(f"    the packing's cell is {d['width_in_diameters']:.3g} mean diameters "
                      f"wide; rve.particles must be at least {r['smallest_valid_particles']} "
                      "for these radii")
-    lines.append(f"estimated DEM wall time on this machine: {r['dem_wall_seconds'] / 3600:.3g} h "
-                 "(an estimate: docs/case-files.md, grainscale check)")
+    if any(m["type"] == "dem" for m in r["materials"].values()):
+        lines.append(f"estimated DEM wall time on this machine: "
+                     f"{r['dem_wall_seconds'] / 3600:.3g} h (an estimate: "
+                     "docs/case-files.md, grainscale check)")
+    else:
+        lines.append("no 'dem' material: no DEM work (the MPM's is not estimated)")
     lines += [f"warning: {w}" for w in r["warnings"]]
     return "\n".join(lines)
