@@ -162,6 +162,10 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0,
             raise SystemExit(f"{f}: no [rve] parameters stored with the packing")
         fresh.setdefault(batch.radius.shape[1], []).append((batch, RVEParams(**stored)))
 
+    def fresh_of(r, n, tiles=1):  # point r's packing of n spheres, as tiles^3 copies
+        batch, rve_params = fresh[n][r % len(fresh[n])]
+        return (batch if tiles == 1 else supercell(r, tiles, batch)), rve_params
+
     def run(batch, p, retile_width=0.0, rve_params=params):
         mat = RVEMaterial("replay", rve_params, [batch], 1, retile_width=retile_width)
         mat.groups, mat.dt_crit = [batch], float(snap["dt_crit"])
@@ -178,10 +182,9 @@ def replay(out: Path, n_points: int, tiles: list[int], skip: int = 0,
     variants = {"as run": lambda r: one.take([r]), "rebuilt": alone,
                 **{f"{n}x{n}x{n}": (lambda r, n=n: supercell(r, n)) for n in tiles},
                 "retiled": lambda r: one.take([r]),
-                **{f"fresh {n}": (lambda r, n=n: fresh[n][r % len(fresh[n])]) for n in fresh},
-                **{f"fresh {n} {m}x{m}x{m}": (lambda r, n=n, m=m: (
-                    supercell(r, m, fresh[n][r % len(fresh[n])][0]),
-                    fresh[n][r % len(fresh[n])][1])) for n in fresh for m in tiles}}
+                **{f"fresh {n}": (lambda r, n=n: fresh_of(r, n)) for n in fresh},
+                **{f"fresh {n} {m}x{m}x{m}": (lambda r, n=n, m=m: fresh_of(r, n, m))
+                   for n in fresh for m in tiles}}
     if only:
         unknown = sorted(set(only) - set(variants))
         if unknown:
