@@ -182,7 +182,7 @@ def tests(budget: float) -> dict:
 def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool,
             regs: int | None = None) -> dict:
     """One configuration of the resident kernel (see the module docstring, 3.)."""
-    from grainscale.dem import cuda_kernel, engine
+    from grainscale.dem import cuda_kernel, engine, kernel
     from grainscale.dem.device_batch import DeviceBatch
 
     cuda_kernel.THREADS = threads
@@ -208,7 +208,7 @@ def measure(base, cp, dt, count: int, threads: int, steps: int, per_call: bool,
         best = min(best, time.perf_counter() - t0)
         moved = dev.moved - before
     status = np.zeros(count, np.int64)
-    out = np.zeros((count, 5))
+    out = np.zeros((count, kernel.OUT_WIDTH))
     law = engine.contact_law(cp)
     kctl = engine.Controls(float(dt), ctrl.e_step, ctrl.l_mean, ctrl.hdot_fixed,
                            ctrl.l_ctrl, ctrl.servo_mask, ctrl.servo_target, 0.0,

@@ -28,7 +28,7 @@ def test_network_of_a_written_rve_matches_the_engine(tmp_path):
     b.v[0] = 0.0
     b.w[0] = 0.0
     engine.refresh(b, p)
-    spheres, contacts, cell = (meshio.read(f) for f in write_rve_vtk(tmp_path / "r", b, p.young))
+    spheres, contacts, cell = (meshio.read(f) for f in write_rve_vtk(tmp_path / "r", b, p))
     assert chains.cell_volume(cell) == pytest.approx(abs(np.linalg.det(b.h[0])), rel=1e-12)
     m = chains.network(contacts, spheres, cell)
     p_engine = p_q(b.stress[0])[0]

@@ -525,7 +525,7 @@ def kernel_cases(parts: list[str], res: dict) -> None:
 
 
 def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
-    """Sections 1, 2, 7, 9, 10, 11 and 14."""
+    """Sections 1, 2, 7, 9, 10, 11, 14 and 15."""
     # 1. shear with a normal-stress servo through list rebuilds, per-RVE step counts
     cpu, gpu = base.copy(), base.copy()
     engine.advance(cpu, SHEAR_STEPS, dt, p, ctrl)
@@ -551,6 +551,24 @@ def fast_cases(base, small, p, dt, ctrl, still, res) -> None:
     res["rolling"] = compare(cpu, gpu)
     res["rolling"]["moment_max"] = float(np.abs(cpu.ft[..., 3:]).max())
     res["rolling"]["history"] = [cpu.ft.shape[3], gpu.ft.shape[3]]
+
+    # 15. Hertz-Mindlin with its dashpot (restitution 0.5) through the same shear, and
+    # the largest overlap both report (an overlap bound below it stops either path)
+    ph = dataclasses.replace(p, contact_law="hertz_mindlin", poisson=0.25, restitution=0.5,
+                             max_overlap=0.5)
+    cpu, gpu = base.copy(), base.copy()
+    engine.advance(cpu, SHEAR_STEPS, dt, ph, ctrl)
+    engine.advance(gpu, SHEAR_STEPS, dt, ph, ctrl, device="cuda")
+    res["hertz"] = compare(cpu, gpu)
+    overlaps = []
+    for device in ("cpu", "cuda"):
+        try:
+            engine.advance(cpu.copy(), 1, dt, dataclasses.replace(ph, max_overlap=1e-6),
+                           still, device=device)
+            overlaps.append(None)
+        except engine.RVEError as err:
+            overlaps.append(float(str(err).split("delta/R* = ")[1].split(",")[0]))
+    res["hertz"]["overlaps"] = overlaps
 
     # 7. the resident path (device_batch.py) against the per-call one: the same kernel
     # on the same data, so bitwise; then the same with a capacity overflow to regrow

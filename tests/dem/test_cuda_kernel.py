@@ -168,6 +168,17 @@ def test_rolling_resistance_agrees_with_cpu(sim):
     assert res["same_counts"] and res["same_pairs"]
 
 
+def test_hertz_mindlin_agrees_with_cpu(sim):
+    """The Hertz-Mindlin law with its dashpot on the device (kernel.contact_pass's
+    branch): the same shear, and the largest overlap delta/R* each path reports (which
+    the overlap bound reads) equal to 3 significant digits (the error prints them so)."""
+    res = sim["hertz"]
+    for name in ARRAYS:
+        assert res[name] < RTOL, (name, res[name])
+    assert res["same_counts"] and res["same_pairs"]
+    assert res["overlaps"][0] is not None and res["overlaps"][0] == res["overlaps"][1]
+
+
 @pytest.mark.validation
 def test_damping_dashpot_idle_threads_and_an_rve_without_steps(sim_long):
     res = sim_long["damped"]

@@ -22,7 +22,7 @@ def independent_state(b, params):
     engine.refresh(c, contact_params(params))
     # the tangential history projected on the contact plane and capped at mu f_n, as the
     # kernel's evaluation does (a sliding contact's stored force may exceed the cap)
-    i, j, d, fn, ft = contact_list(c, params.young_modulus, friction=params.friction)
+    i, j, d, fn, ft = contact_list(c, contact_params(params))
     n = d / np.linalg.norm(d, axis=1)[:, None]
     f_on_i = ft - fn[:, None] * n
     # Love-Weber plus the kinetic stress of the residual grain velocities
@@ -64,7 +64,7 @@ def check_packing(b, params, pressure, porosity, p_tol, n_tol):
 
 
 def mechanical_coordination(b, params):
-    i, j, _, _, _ = contact_list(b, params.young_modulus)
+    i, j, _, _, _ = contact_list(b, contact_params(params))
     n = b.n_particles
     alive = np.ones(n, bool)
     while True:

@@ -64,7 +64,7 @@ def test_vtk_snapshot_counts_and_values(tmp_path):
     Cell file: the 8 corners h @ {0,1}^3."""
     b, p, dt = agitated_dense_state()
     engine.refresh(b, p)
-    paths = write_rve_vtk(tmp_path / "snap", b, p.young)
+    paths = write_rve_vtk(tmp_path / "snap", b, p)
     assert [q.name for q in paths] == ["snap_spheres.vtu", "snap_contacts.vtu",
                                        "snap_cell.vtu"]
     sph = meshio.read(paths[0])
@@ -111,7 +111,7 @@ def test_vtk_contact_line_starts_at_drawn_sphere_across_boundary(tmp_path):
     engine.advance(b, 6, engine.critical_dt(b, p, 0.1), p, engine.rate_control(1))
     assert b.s[0, 0, 0] < 0 and b.need_rebuild[0] == 0 and b.ncontact[0] == 1
     engine.refresh(b, p)
-    sph, con, _ = (meshio.read(q) for q in write_rve_vtk(tmp_path / "c", b, p.young))
+    sph, con, _ = (meshio.read(q) for q in write_rve_vtk(tmp_path / "c", b, p))
     (i0, i1), = con.cells_dict["line"]
     start, end = con.points[i0], con.points[i1]
     np.testing.assert_allclose(start, sph.points[0], rtol=0, atol=1e-15)

@@ -176,7 +176,7 @@ def test_damping_dissipates_and_is_bounded():
         e_kin = 0.5 * np.sum(batch.mass[0] * np.sum(batch.v[0] ** 2, axis=1)) \
             + 0.5 * np.sum(batch.inertia[0] * np.sum(batch.w[0] ** 2, axis=1))
         from grainscale.io.rve_vtk import contact_list
-        i, j, d, fn, _ = contact_list(batch, p.young)
+        i, j, d, fn, _ = contact_list(batch, p)
         r = batch.radius[0]
         kn = p.young * 2 * r[i] * r[j] / (r[i] + r[j])
         return e_kin + 0.5 * np.sum(fn**2 / kn)
@@ -209,7 +209,7 @@ def test_energy_conserved_without_damping_and_friction():
         v = c.v[0] + 0.5 * dt * c.force[0] / c.mass[0][:, None]
         e_kin = 0.5 * np.sum(c.mass[0] * np.sum(v**2, axis=1)) \
             + 0.5 * np.sum(c.inertia[0] * np.sum(c.w[0] ** 2, axis=1))
-        i, j, d, fn, _ = contact_list(c, p.young)
+        i, j, d, fn, _ = contact_list(c, p)
         r = c.radius[0]
         kn = p.young * 2 * r[i] * r[j] / (r[i] + r[j])
         return e_kin + 0.5 * np.sum(fn**2 / kn), 0.5 * np.sum(fn**2 / kn)

@@ -55,8 +55,7 @@ def dispatch(args: argparse.Namespace) -> int:
         batch = prepared(case, None, args.quiet)
         rve.save(case, batch, args.out)
         if args.vtk is not None:
-            write_rve_vtk(args.vtk, batch, case.rve.young_modulus,
-                          gamma=contact_params(case.rve).gamma, friction=case.rve.friction)
+            write_rve_vtk(args.vtk, batch, contact_params(case.rve))
         row = element_tests.state_row(batch)
         print(f"wrote {args.out}: porosity {row['porosity']:.4f}, p = {row['p']:.5g} Pa, "
               f"coordination {row['coordination']:.2f} ({time.perf_counter() - t0:.1f} s)")

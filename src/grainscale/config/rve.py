@@ -6,6 +6,7 @@ particles = 800
 radius_min = 3e-3
 radius_max = 7e-3
 density = 2650.0
+contact_law = "linear"     # or "hertz_mindlin" (with poisson_ratio, no stiffness_ratio)
 young_modulus = 100e6
 stiffness_ratio = 0.8      # kt/kn
 friction = 0.5
@@ -48,7 +49,8 @@ class Preparation(StrictModel):
     consolidation_pressure: float | None = Field(
         None, gt=0,
         description="pressure at which the porosity is set before unloading to `pressure` "
-        "[Pa] (default: max(pressure, young_modulus / 2e4))")
+        "[Pa] (default: max(pressure, young_modulus / 2e4), hertz_mindlin: max(pressure, "
+        "E* / 2e4^1.5), E* = E / (2 (1 - nu^2)))")
     compaction_friction: float | None = Field(
         None, ge=0, description="friction to start compaction with (default: friction)")
     damping: float = Field(0.5, ge=0, lt=1, description="local damping while preparing")
@@ -64,6 +66,10 @@ class Numerics(StrictModel):
                         description="Verlet skin as a fraction of radius_min")
     servo_gain: float = Field(0.05, gt=0, le=0.5,
                               description="fraction of the stress error corrected a step")
+    max_overlap: float = Field(
+        0.01, gt=0, le=0.2, description="Hertz-Mindlin: the largest overlap delta/R* the "
+        "time step is set for (k_max = 2 E* R* sqrt(max_overlap)); a larger one stops the "
+        "run with an error naming this key")
 
 
 class RVEParams(StrictModel):
@@ -71,8 +77,14 @@ class RVEParams(StrictModel):
     radius_min: float = Field(3e-3, gt=0, description="smallest radius [m]")
     radius_max: float = Field(7e-3, gt=0, description="largest radius [m]")
     density: float = Field(2650.0, gt=0, description="grain density [kg/m^3]")
-    young_modulus: float = Field(100e6, gt=0, description="E in kn = E r* [Pa]")
-    stiffness_ratio: float = Field(0.8, gt=0, le=1.0, description="kt/kn")
+    contact_law: Literal["linear", "hertz_mindlin"] = Field(
+        "linear", description="'linear': kn = E r*, kt = stiffness_ratio kn (seed Eq. 7-10); "
+        "'hertz_mindlin': f_n = (4/3) E* sqrt(R*) delta^(3/2), kt = 8 G* a (docs/dem.md)")
+    young_modulus: float = Field(100e6, gt=0, description="E [Pa]: kn = E r* (linear), the "
+                                 "grains' Young's modulus (hertz_mindlin)")
+    poisson_ratio: float | None = Field(
+        None, ge=0, lt=0.5, description="the grains' Poisson's ratio nu (hertz_mindlin only)")
+    stiffness_ratio: float = Field(0.8, gt=0, le=1.0, description="kt/kn (linear only)")
     friction: float = Field(0.5, ge=0, le=10, description="interparticle friction mu")
     restitution: float = Field(
         1.0, gt=0, le=1, description="normal coefficient of restitution e of a binary "
@@ -95,7 +107,29 @@ class RVEParams(StrictModel):
         key = self.model_dump(mode="json")
         if self.rolling_stiffness == 0.0:
             del key["rolling_stiffness"], key["rolling_friction"]
+        if self.contact_law == "linear":
+            del key["contact_law"], key["poisson_ratio"], key["numerics"]["max_overlap"]
+        else:
+            del key["stiffness_ratio"]
         return key
+
+    @model_validator(mode="after")
+    def _contact_law(self):
+        if self.contact_law == "hertz_mindlin":
+            if self.poisson_ratio is None:
+                raise ValueError(
+                    "contact_law = 'hertz_mindlin' needs poisson_ratio (the grains' "
+                    "Poisson's ratio); valid range: [0, 0.5)")
+            if "stiffness_ratio" in self.model_fields_set:
+                raise ValueError(
+                    f"stiffness_ratio = {self.stiffness_ratio!r} has no effect with "
+                    "contact_law = 'hertz_mindlin' (kt/kn = 2 (1 - nu)/(2 - nu) follows from "
+                    "poisson_ratio); remove it, or use contact_law = 'linear'")
+        elif self.poisson_ratio is not None:
+            raise ValueError(
+                f"poisson_ratio = {self.poisson_ratio!r} has no effect with contact_law = "
+                "'linear'; remove it, or use contact_law = 'hertz_mindlin'")
+        return self
 
     @model_validator(mode="after")
     def _rolling(self):

@@ -85,7 +85,7 @@ def describe(p: Probe) -> str:
 
 
 def _local_rve(s: MPMState, point: int):
-    """(RVE copy refreshed in its configuration, young, gamma, friction) of global point
+    """(RVE copy refreshed in its configuration, its contact law) of global point
     `point` if this rank owns it, else None."""
     pos = int(np.searchsorted(s.point_ids, point))
     if pos == len(s.point_ids) or s.point_ids[pos] != point:
@@ -95,7 +95,7 @@ def _local_rve(s: MPMState, point: int):
     row = pos if ids is None else int(np.searchsorted(ids, pos))
     batch = mat.rve(row)
     engine.refresh(batch, mat.cp)
-    return batch, mat.cp.young, mat.cp.gamma, mat.cp.friction
+    return batch, mat.cp
 
 
 class ProbeWriter:
@@ -144,10 +144,10 @@ class ProbeWriter:
         parts = self.comm.gather(mine)
         if parts is None:
             return
-        for i, (batch, young, gamma, friction) in sorted(
+        for i, (batch, cp) in sorted(
                 (x for part in parts for x in part), key=lambda x: x[0]):
             name = self.probes[i].name
             paths = write_rve_vtk(self.out / "frames" / f"probe_{name}_{frame:05d}", batch,
-                                  young, 0, gamma, friction)
+                                  cp)
             for kind, path in zip(KINDS, paths, strict=True):
                 self.series[name][kind].add(s.time, path)

@@ -494,7 +494,7 @@ class RVEMaterial:
         """(k,3,3) predicted stresses [Pa] of a group's waiting RVEs `which` (their points
         rows[which]): coupling/predictor.py."""
         return predictor.predicted_stress(batch.stress[which], batch.stiffness[which],
-                                          self.H_acc[rows[which]], self.cp.stiffness_ratio)
+                                          self.H_acc[rows[which]], self.cp.kt_ratio)
 
     def _reduce_cells(self, batch: RVEBatch, target) -> None:
         """lattice.reduce_cells of a group; on the GPU only the RVEs to reduce make the

@@ -5,8 +5,9 @@ equations: cell control with servos, linear spring(-dashpot) contacts kn = E r*,
 2 ri rj/(ri + rj), kt = ratio kn, tangential history rotated with the contact frame and
 capped at mu max(f_n, 0), Love-Weber stress minus the kinetic stress, affine stiffness,
 leapfrog with Cundall damping and the SLLOD pseudo-force, the Verlet-skin list check),
-the same status codes (neighbours.Status) and the same `out[r, 0..4]`: contacts,
-unbalanced-force ratio, kinetic energy [J], row length a build asked for, steps done.
+the same status codes (neighbours.Status) and the same `out[r, 0..5]`: contacts,
+unbalanced-force ratio, kinetic energy [J], row length a build asked for, steps done,
+largest overlap delta/R* (Hertz-Mindlin: kn = 2 E* a, f_n = (2/3) kn delta).
 
 Layout. One thread block per RVE (a block loops over RVEs r = blockIdx, blockIdx +
 gridDim, ... so that the scratch below is needed per block, not per RVE); its threads
@@ -75,7 +76,8 @@ THREADS = 128  # block size (threads per RVE) of calls that name none; may be se
 MAX_REGISTERS = 128
 MAX_BLOCKS = 1024  # blocks (RVEs in flight) of calls that name none; the scratch is per
 # block; may be set
-NRED = 17  # partial sums reduced per block: contacts, sum f_n, 9 stress, 6 stiffness
+NSUM = 17  # partial sums reduced per block: contacts, sum f_n, 9 stress, 6 stiffness
+NRED = NSUM + 1  # and a maximum: the largest overlap delta/R* (Hertz-Mindlin)
 # status codes as plain ints (compile-time constants of the device code)
 OK, OVERFLOW, TOO_THIN, NOT_FINITE = (int(Status.OK), int(Status.OVERFLOW),
                                       int(Status.TOO_THIN), int(Status.NOT_FINITE))
@@ -325,14 +327,15 @@ def _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res):
 
 
 @cuda.jit(device=True)
-def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r, eta_r, h,
-                  s, v, w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force, torque,
+def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r, eta_r, hz,
+                  h, s, v, w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force, torque,
                   x, tab, ent, rev, revc, red, res, homogenise, commit, full_moduli):
     """Contact forces and torques of RVE r (kernel.contact_pass, same law and arithmetic
     per contact, the history written only if `commit`); collective. Leaves in res: [0]
     contacts, [1] sum f_n [N] and, if `homogenise`, [2..10] sum d (x) F - sum m v (x) v
-    (row-major) and [11..16] the affine moduli sums c00, c11, c22, c01, c02, c12 (kt's
-    part only with `full_moduli`; neither divided by V yet)."""
+    (row-major), [11..16] the affine moduli sums c00, c11, c22, c01, c02, c12 (kt's
+    part only with `full_moduli`; neither divided by V yet) and [17] the largest overlap
+    delta/R* (Hertz-Mindlin, hz = 2 E* > 0; else 0)."""
     n = s.shape[1]
     cap = nbr_j.shape[2]
     hw = ft.shape[3]
@@ -358,6 +361,7 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r
     c00 = c11 = c22 = c01 = c02 = c12 = 0.0
     ncontact = 0.0
     fsum = 0.0
+    omax = 0.0
     kt_mod = kt_ratio if full_moduli else 0.0
     geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
     cuda.syncthreads()  # every x written
@@ -390,8 +394,14 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r
             n0 = d0 * inv
             n1 = d1 * inv
             n2 = d2 * inv
-            kn = young * 2.0 * ri * rj * dist * inv2
-            fn = kn * (rr - dist)
+            if hz > 0.0:  # Hertz, as kernel.contact_pass
+                ovl = (rr - dist) * rr / (ri * rj)
+                kn = hz * ri * rj * dist * inv2 * math.sqrt(ovl)
+                fn = (2.0 / 3.0) * kn * (rr - dist)
+                omax = _max(omax, ovl)
+            else:
+                kn = young * 2.0 * ri * rj * dist * inv2
+                fn = kn * (rr - dist)
             half = 0.5 * (rr - dist)
             li = ri - half
             lj = rj - half
@@ -572,7 +582,9 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r
         red[14, tid] = c01
         red[15, tid] = c02
         red[16, tid] = c12
-        _sum_rows(red, res, NRED, tid)
+        red[NSUM, tid] = omax
+        _sum_rows(red, res, NSUM, tid)
+        _max_row(red, res, NSUM, tid)
     else:
         _sum_rows(red, res, 2, tid)
 
@@ -767,7 +779,7 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
 
     @jit
     def advance_kernel(nsteps, young, kt_ratio, friction, gamma, damping, skin, alpha_r,
-                       eta_r, dt,
+                       eta_r, hz, dt,
                        servo_gain, h, s, v, w, rot, radius, mass, inertia, L, stress,
                        stress_servo, stiffness, step_count, nbr_j, nbr_shift, nbr_count, ft,
                        s_ref, h_ref, need_rebuild, e_step, l_mean, hdot_fixed, l_ctrl,
@@ -819,7 +831,7 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                 cuda.syncthreads()
                 # 3-4. contacts, and the stress the servo reads
                 _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r,
-                              eta_r, h, s, v, w, radius, mass, Ls, nbr_j, nbr_shift,
+                              eta_r, hz, h, s, v, w, radius, mass, Ls, nbr_j, nbr_shift,
                               nbr_count, ft, force, torque, x, tab, ent, rev, revc, red, res,
                               sample, True, False)
                 ncontact = res[0]
@@ -874,13 +886,14 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                         _end_frame(r, h, L, Ls, tab)
                     cuda.syncthreads()
                     _contact_pass(r, g, tid, nthr, 0.0, young, kt_ratio, friction, gamma,
-                                  alpha_r, eta_r, h, s, v, w, radius, mass, Ls, nbr_j,
+                                  alpha_r, eta_r, hz, h, s, v, w, radius, mass, Ls, nbr_j,
                                   nbr_shift, nbr_count, ft, force, torque, x, tab, ent, rev,
                                   revc, red, res, True, False, not servo_on)
                     ncontact = res[0]
                     fsum = res[1]
                     if tid == 0:
                         _write_homogenised(r, h, res, stress, stiffness, not servo_on)
+                        out[r, 5] = res[NSUM]
                     cuda.syncthreads()  # res read before the residuals overwrite it
                     _residuals(r, g, tid, nthr, force, v, w, mass, inertia, red)
                     _sum_rows(red, res, 3, tid)  # res[0] is then max-free: not read
@@ -951,7 +964,7 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
            threads: int | None = None, max_blocks: int | None = None) -> tuple | None:
     """Run the batch kernel on device arrays: d_nsteps (R,) int64, dev the state arrays
     in STATE_ARGS order, dctl the controls in CONTROL_ARGS order, d_status (R,) int64,
-    d_out (R,5). Nothing crosses to the host (dem/device_batch.py keeps the state there).
+    d_out (R,6). Nothing crosses to the host (dem/device_batch.py keeps the state there).
     Returns the per-block scratch (_scratch's arrays; None for an empty batch): block g
     ran RVEs g, g + B, ... with B = min(R, max_blocks), so where R <= max_blocks its
     SCRATCH_ARGS hold RVE g's last step.
@@ -976,7 +989,7 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
     _KERNELS[key][blocks, threads](
         d_nsteps, float(law.young), float(law.kt_ratio), float(law.friction),
         float(law.gamma), float(law.damping), float(law.skin), float(law.rolling_stiffness),
-        float(law.rolling_friction), float(dt), float(servo_gain),
+        float(law.rolling_friction), float(law.hertz_kn), float(dt), float(servo_gain),
         *dev, *dctl, d_status, d_out, *scratch)
     return scratch
 
@@ -985,7 +998,7 @@ def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
                   max_blocks: int | None = None) -> None:
     """Advance every RVE r by nsteps[r] steps on the GPU: kernel.advance_batch's
     arguments (host arrays: RveState st, ContactLaw law, Controls ctl with the RVE index
-    first, status (R,), out (R,5)), results written back into them.
+    first, status (R,), out (R,6)), results written back into them.
 
     The per-call path: copies the state to the device, runs every step there (`launch`),
     and copies it back. A run keeps its state on the device instead (device_batch.py).

@@ -5,9 +5,9 @@ cuda_kernel.STATE_ARGS) and its host batch, `host`. `engine.advance` on a Device
 the kernel on the device arrays; per call only the step counts and the controls go down
 and the small per-RVE results come up:
 
-    down: nsteps, status and out (56 B), e_step and l_mean (72 B each); the other
+    down: nsteps, status and out (64 B), e_step and l_mean (72 B each); the other
           controls only when not all zero (an MPM increment has none)
-    up:   status (8 B), out (40 B: contacts, unbalanced ratio, kinetic energy, ...),
+    up:   status (8 B), out (48 B: contacts, unbalanced ratio, kinetic energy, ...),
           h, stress and stiffness (72 B each), the non-finite flag (4 B)
 
 so after a call `host.h`, `host.stress`, `host.stiffness`, `host.ncontact`,
@@ -393,7 +393,7 @@ class DeviceBatch:
 
     def step(self, nsteps, law, ctl, status: np.ndarray, out: np.ndarray) -> None:
         """One kernel pass (engine.advance's loop body): nsteps (R,) int64, kernel
-        ContactLaw and Controls, status (R,) and out (R,5) written on the host, with
+        ContactLaw and Controls, status (R,) and out (R,6) written on the host, with
         UP_EACH_CALL into `host`."""
         nsteps = np.ascontiguousarray(nsteps, np.int64)
         d_nsteps = cuda.to_device(nsteps)

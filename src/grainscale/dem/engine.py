@@ -15,7 +15,9 @@ from numba import njit
 
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import Numerics
+from grainscale.dem import hertz
 from grainscale.dem.kernel import (
+    OUT_WIDTH,
     ContactLaw,
     Controls,
     RveState,
@@ -42,16 +44,24 @@ class RVEError(RuntimeError):
 
 @dataclass(frozen=True)
 class ContactParams:
-    """Linear contact law and damping (seed Eq. 7-10)."""
+    """Contact law and damping: the linear law (seed Eq. 7-10) or Hertz-Mindlin
+    (dem/hertz.py), with Coulomb friction and, optionally, rolling resistance."""
 
-    young: float            # E [Pa]; kn = E r*
-    stiffness_ratio: float  # kt / kn
+    young: float            # E [Pa]; linear: kn = E r*; Hertz-Mindlin: the grains' modulus
+    stiffness_ratio: float  # kt / kn (linear; Hertz-Mindlin: from poisson)
     friction: float         # mu = tan(phi_interparticle)
     damping: float          # Cundall local non-viscous damping coefficient [0, 1); [rve]
     skin: float = 1e-3      # Verlet skin [m]
     restitution: float = 1.0  # normal coefficient of restitution e, (0, 1]; 1: elastic
     rolling_stiffness: float = 0.0  # alpha_r in k_r = alpha_r kt r_i r_j; 0: no rolling law
     rolling_friction: float = 0.0   # eta_r in |M_r| <= eta_r min(r_i, r_j) f_n
+    contact_law: str = "linear"     # or "hertz_mindlin"
+    poisson: float = 0.0            # nu (Hertz-Mindlin)
+    max_overlap: float = 0.01       # Hertz-Mindlin: largest delta / R* the step is set for
+
+    @property
+    def hertz(self) -> bool:
+        return self.contact_law == "hertz_mindlin"
 
     @property
     def history(self) -> int:
@@ -59,9 +69,23 @@ class ContactParams:
         return HISTORY_ROLLING if self.rolling_stiffness > 0.0 else HISTORY
 
     @property
+    def kt_ratio(self) -> float:
+        """kt / kn of the law: the given ratio (linear), 2 (1 - nu) / (2 - nu) (Hertz)."""
+        return hertz.stiffness_ratio(self.poisson) if self.hertz else self.stiffness_ratio
+
+    @property
+    def hertz_kn(self) -> float:
+        """2 E* [Pa], the tangent normal stiffness per contact radius (Hertz-Mindlin);
+        0 for the linear law (the kernels' switch)."""
+        return 2.0 * hertz.effective_modulus(self.young, self.poisson) if self.hertz else 0.0
+
+    @property
     def gamma(self) -> float:
-        """Damping ratio of the normal dashpot giving restitution e to a linear spring:
-        gamma = -ln e / sqrt(pi^2 + ln^2 e) (0 for e = 1)."""
+        """Damping ratio of the normal dashpot c_n = 2 gamma sqrt(m* kn) that restitutes
+        e: -ln e / sqrt(pi^2 + ln^2 e) for a linear spring, sqrt(5/6) times that for a
+        Hertzian one (kn its tangent stiffness; hertz.beta_of_restitution); 0 for e = 1."""
+        if self.hertz:
+            return hertz.beta_of_restitution(self.restitution)
         le = math.log(self.restitution)
         return -le / math.sqrt(math.pi**2 + le * le)
 
@@ -161,10 +185,10 @@ def increment_control(batch: RVEBatch, dH: np.ndarray, nsteps, dt: float) -> Con
 
 def contact_law(params: ContactParams) -> ContactLaw:
     """The kernels' ContactLaw of a ContactParams."""
-    return ContactLaw(float(params.young), float(params.stiffness_ratio),
+    return ContactLaw(float(params.young), float(params.kt_ratio),
                       float(params.friction), float(params.gamma), float(params.damping),
                       float(params.skin), float(params.rolling_stiffness),
-                      float(params.rolling_friction))
+                      float(params.rolling_friction), float(params.hertz_kn))
 
 
 def rve_arrays(batch: RVEBatch) -> RveState:
@@ -174,16 +198,23 @@ def rve_arrays(batch: RVEBatch) -> RveState:
 
 def critical_dt(batch: RVEBatch, params: ContactParams,
                 safety: float = Numerics().timestep_safety) -> float:
-    """safety x sqrt(m_min / k_max), k_max = E r_max (the stiffest possible contact) [s],
-    divided by sqrt(1 + alpha_r r_max / r_min) with rolling resistance.
+    """safety x sqrt(m_min / k_max) [s], k_max the stiffest possible contact: E r_max
+    (linear, kn = E r* <= E r_max), or the Hertzian tangent stiffness 2 E* sqrt(R* delta)
+    at the largest overlap the law admits, delta = max_overlap R*, R* <= r_max / 2:
+    E* r_max sqrt(max_overlap) (a larger overlap stops the run: `advance`). Divided by
+    sqrt(1 + alpha_r r_max / r_min) with rolling resistance.
 
-    The rotation of grain i about an axis in a contact plane is held by the tangential
-    spring, kt l_i^2 ~ kt r_i^2, and the rolling spring, alpha_r kt r_i r_j: against its
-    inertia 0.4 m_i r_i^2 the rolling spring raises the squared frequency of that mode
-    by the factor 1 + alpha_r r_j / r_i <= 1 + alpha_r r_max / r_min over the law the
-    safety factor was chosen for (tangential springs alone, kt <= kn), so the step
-    shrinks by its square root (alpha_r = 0: unchanged)."""
-    dt = safety * float(np.sqrt(batch.mass.min() / (params.young * batch.radius.max())))
+    kt <= kn in both laws (Hertz-Mindlin: kt/kn = 2 (1 - nu)/(2 - nu)), which the safety
+    factor was chosen for. The rotation of grain i about an axis in a contact plane is
+    held by the tangential spring, kt l_i^2 ~ kt r_i^2, and the rolling spring, alpha_r kt
+    r_i r_j: against its inertia 0.4 m_i r_i^2 the rolling spring raises the squared
+    frequency of that mode by the factor 1 + alpha_r r_j / r_i <= 1 + alpha_r r_max /
+    r_min, so the step shrinks by its square root (alpha_r = 0: unchanged)."""
+    if params.hertz:
+        k_max = 0.5 * params.hertz_kn * batch.radius.max() * math.sqrt(params.max_overlap)
+    else:
+        k_max = params.young * batch.radius.max()
+    dt = safety * float(np.sqrt(batch.mass.min() / k_max))
     if params.rolling_stiffness > 0.0:
         spread = float(batch.radius.max() / batch.radius.min())
         dt /= math.sqrt(1.0 + params.rolling_stiffness * spread)
@@ -254,7 +285,7 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
         raise ValueError(f"nsteps = {int(remaining.min())}: must be >= -1")
     owed = remaining != 0  # the end-of-increment evaluation is still to be done
     status = np.zeros(host.n_rve, np.int64)
-    out = np.zeros((host.n_rve, 5))
+    out = np.zeros((host.n_rve, OUT_WIDTH))
     r = host.n_rve
     max_rate = control.max_rate if control.max_rate is not None else np.zeros(r)
     e_step = control.e_step if control.e_step is not None else np.broadcast_to(
@@ -281,6 +312,13 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
         host.kinetic[ended] = out[ended, 2]
         owed &= ~ended
         _check(batch, status, out)
+    if params.hertz and np.any(out[:, 5] > params.max_overlap):
+        r = int(np.argmax(out[:, 5]))
+        raise RVEError(r,
+            f"RVE {r}: a Hertzian overlap reached delta/R* = {out[r, 5]:.3g}, above "
+            f"rve.numerics.max_overlap = {params.max_overlap:g}, the largest the time step "
+            f"was set for (engine.critical_dt); valid: max_overlap above it (a smaller "
+            f"step), or stiffer grains (young_modulus) for this stress")
     return batch
 
 

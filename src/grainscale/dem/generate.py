@@ -4,10 +4,11 @@
    first) in a cubic periodic cell at a loose `initial_porosity`.
 2. Servo-controlled isotropic compression to the consolidation pressure with a
    compaction friction (default: the real friction) until equilibrium. Very stiff grains
-   at low pressure (E/p above 2e4, e.g. the column-collapse RVE at 500 Pa) jam only
-   slowly under a stress servo, so by default they are consolidated at p_c = E/2e4 and
-   unloaded to the target pressure at the end; unloading is elastic (strain ~ p_c/E), so
-   it changes the porosity by well under 1e-3.
+   at low pressure (stiffness number E/p above 2e4, e.g. the column-collapse RVE at 500
+   Pa; (E*/p)^(2/3) for Hertz-Mindlin) jam only slowly under a stress servo, so by
+   default they are consolidated where it is 2e4 (`jamming_pressure`) and unloaded to
+   the target pressure at the end; unloading is elastic (strain ~ 1/2e4), so it changes
+   the porosity by well under 1e-3.
 3. If a target porosity is given and the packing is looser, the compaction friction is
    lowered step by step, re-equilibrating at the target pressure each time: lower
    friction lets the packing densify. A step that overshoots the target is undone from a
@@ -28,7 +29,7 @@ import numpy as np
 
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams, min_particles
-from grainscale.dem import engine, homogenise
+from grainscale.dem import engine, hertz, homogenise
 from grainscale.dem.state import RVEBatch, from_packing
 
 
@@ -50,7 +51,18 @@ def contact_params(params: RVEParams, friction: float | None = None,
         young=params.young_modulus, stiffness_ratio=params.stiffness_ratio, friction=mu,
         damping=params.damping if damping is None else damping,
         skin=params.numerics.skin * params.radius_min, restitution=params.restitution,
-        rolling_stiffness=params.rolling_stiffness, rolling_friction=eta)
+        rolling_stiffness=params.rolling_stiffness, rolling_friction=eta,
+        contact_law=params.contact_law, poisson=params.poisson_ratio or 0.0,
+        max_overlap=params.numerics.max_overlap)
+
+
+def jamming_pressure(params: RVEParams) -> float:
+    """The pressure [Pa] at which the stiffness number is 2e4 (module docstring, 2): E/p
+    for the linear law (kn/(p d) up to a constant), (E*/p)^(2/3) for Hertz-Mindlin
+    (Agnolin & Roux 2007's kappa; overlaps delta/d ~ 1/kappa in both laws)."""
+    if params.contact_law == "hertz_mindlin":
+        return hertz.effective_modulus(params.young_modulus, params.poisson_ratio) / 2e4**1.5
+    return params.young_modulus / 2e4
 
 
 def insert_random(n: int, rmin: float, rmax: float, porosity: float,
@@ -132,7 +144,7 @@ def generate(params: RVEParams, progress=None) -> RVEBatch:
     dt = engine.critical_dt(batch, cp, params.numerics.timestep_safety)
     mu = params.friction if prep.compaction_friction is None else prep.compaction_friction
 
-    p_cons = prep.consolidation_pressure or max(prep.pressure, params.young_modulus / 2e4)
+    p_cons = prep.consolidation_pressure or max(prep.pressure, jamming_pressure(params))
 
     def settle_from(state: RVEBatch, friction: float) -> tuple[RVEBatch, float]:
         nonlocal batch

@@ -16,7 +16,9 @@ Per step of one RVE (dt fixed), in the order the code runs:
    the mean-field velocity gradient is L = L_mean + (hdot_fixed + L_c h) h^-1, where
    L_mean = log(E)/dt is the exact rate of the step map (skew for a rotation).
 3. contacts over the half list, in the current cell h (seed Eq. 7-10): kn = E r*,
-   r* = 2 ri rj/(ri + rj), kt = ratio kn; f_n = kn delta; tangential force history
+   r* = 2 ri rj/(ri + rj), kt = ratio kn; f_n = kn delta (Hertz-Mindlin, law.hertz_kn
+   > 0: kn = 2 E* a the tangent stiffness, a = sqrt(R* delta), f_n = (2/3) kn delta,
+   kt = ratio kn with ratio = 2 (1 - nu)/(2 - nu); dem/hertz.py); tangential force history
    rotated with the contact frame, incremented by kt v_t dt and capped at mu f_n. The
    relative velocity includes the mean-field term D d across periodic images (D = sym L:
    the mean field carries a pair rigidly with its spin W = skew L, which only turns the
@@ -87,6 +89,7 @@ U3 = np.uintp(3)
 # and batches allocate differently)
 ELEMENTWISE = {"nnan", "ninf", "nsz", "arcp", "afn"}
 SERVO_EVERY = 4  # steps between stress samples of a servo
+OUT_WIDTH = 6  # a call's outputs per RVE (`out`, _advance_rve's docstring)
 
 
 class RveState(NamedTuple):
@@ -134,6 +137,7 @@ class ContactLaw(NamedTuple):
     skin: float      # Verlet skin [m]
     rolling_stiffness: float  # alpha_r: k_r = alpha_r kt r_i r_j [N m/rad]; 0: off
     rolling_friction: float   # eta_r: |M_r| <= eta_r min(r_i, r_j) max(f_n, 0)
+    hertz_kn: float  # 2 E* [Pa]: Hertz-Mindlin, kn = 2 E* a (dem/hertz.py); 0: linear
 
 
 class Controls(NamedTuple):
@@ -209,7 +213,8 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
 
     Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
     c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
-    restitution coefficient (0: elastic). The dashpot is not clipped, so an isolated
+    restitution coefficient (0: elastic); with law.hertz_kn = 2 E* > 0 (Hertz-Mindlin)
+    kn = 2 E* sqrt(R* delta) is the tangent stiffness and the elastic part (2/3) kn delta. The dashpot is not clipped, so an isolated
     collision returns exactly e; the Coulomb cap uses max(f_n, 0).
 
     Updates the tangential history by dt if `commit` (else the history is only read: with
@@ -225,10 +230,11 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
     of an increment taken in one step along that axis, which the MPM's wave speed reads
     (tests/dem/test_end_of_increment.py). Without, the normal springs' alone,
     (1/V) sum kn |d|^2 n_a^2 n_b^2 (the servo's C_ab).
-    Returns (number of contacts, sum of normal contact forces [N]).
+    Returns (number of contacts, sum of normal contact forces [N], the largest overlap
+    delta/R* (Hertz-Mindlin; 0 for the linear law)).
     """
     young, kt_ratio, friction, gamma = law.young, law.kt_ratio, law.friction, law.gamma
-    alpha_r, eta_r = law.rolling_stiffness, law.rolling_friction
+    alpha_r, eta_r, hz = law.rolling_stiffness, law.rolling_friction, law.hertz_kn
     literally(hw)  # a compile-time constant: a width read at run time cost 10 % a step
     rolling = hw == 6  # without it the moment's code is not compiled in
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
@@ -251,6 +257,7 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
     c00 = c11 = c22 = c01 = c02 = c12 = 0.0
     ncontact = 0
     fsum = 0.0
+    omax = 0.0
     xf = x.reshape(3 * n)
     vf = v.reshape(3 * n)
     wf = w.reshape(3 * n)
@@ -293,8 +300,14 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
             n0 = d0 * inv
             n1 = d1 * inv
             n2 = d2 * inv
-            kn = young * 2.0 * ri * rj * dist * inv2
-            fn = kn * (rr - dist)
+            if hz > 0.0:  # Hertz: kn the tangent stiffness 2 E* a, a = sqrt(R* delta)
+                ovl = (rr - dist) * rr / (ri * rj)  # delta / R*
+                kn = hz * ri * rj * dist * inv2 * math.sqrt(ovl)
+                fn = (2.0 / 3.0) * kn * (rr - dist)
+                omax = max(omax, ovl)
+            else:
+                kn = young * 2.0 * ri * rj * dist * inv2
+                fn = kn * (rr - dist)
             # relative velocity of j's surface w.r.t. i's at the contact point. The mean
             # field moves the pair rigidly with its spin W, so only its strain rate D
             # enters (a spinning cell makes no slip); particle spins w are fluctuations
@@ -437,7 +450,7 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
         torque[i, 1] += ti1
         torque[i, 2] += ti2
     if not homogenise:
-        return ncontact, fsum
+        return ncontact, fsum, omax
     # kinetic (Reynolds) stress of the fluctuating motion, -(1/V) sum m v' (x) v': the
     # momentum the grains carry across any plane, a pressure in dilute or fast flow
     for i in range(n):
@@ -470,7 +483,7 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
     stiff_out[0, 1] = stiff_out[1, 0] = c01 * iv
     stiff_out[0, 2] = stiff_out[2, 0] = c02 * iv
     stiff_out[1, 2] = stiff_out[2, 1] = c12 * iv
-    return ncontact, fsum
+    return ncontact, fsum, omax
 
 
 @njit(cache=True, fastmath=ELEMENTWISE, error_model="numpy")
@@ -585,9 +598,10 @@ def _advance_rve(nsteps, law, st, ctl, out, hw):
     """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
     ctl.dt [s]; see the module docstring.
 
-    `hw` is the history's width (literal 3 or 6; advance_rve). `out` (5,) receives:
+    `hw` is the history's width (literal 3 or 6; advance_rve). `out` (6,) receives:
     contacts, unbalanced-force ratio, kinetic energy [J], the row
-    length a list build asked for, steps done. Returns a status code (0 = ok). After the
+    length a list build asked for, steps done, the largest overlap delta/R* (Hertz-Mindlin;
+    0 for the linear law). Returns a status code (0 = ok). After the
     steps (and with nsteps = -1 alone: no step) the stress, the moduli (unless a servo
     runs), contact count, unbalanced-force ratio and kinetic energy are those of the
     state reached (item 8).
@@ -671,11 +685,11 @@ def _advance_rve(nsteps, law, st, ctl, out, hw):
         # caller's stress is evaluated after the loop, at the end of the increment (8)
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
         if sample:  # two specialisations: the hot one keeps no stress sums live
-            ncontact, fsum = contact_pass(dt, law, st, hw, table, stress_servo, stiffness,
-                                          True)
+            ncontact, fsum, _ = contact_pass(dt, law, st, hw, table, stress_servo,
+                                             stiffness, True)
         else:
-            ncontact, fsum = contact_pass(dt, law, st, hw, table, stress_servo, stiff_scratch,
-                                          False)
+            ncontact, fsum, _ = contact_pass(dt, law, st, hw, table, stress_servo,
+                                             stiff_scratch, False)
         step_count[0] += 1
         # 5. new cell, its inverse for the position update
         for a in range(3):
@@ -719,11 +733,12 @@ def _advance_rve(nsteps, law, st, ctl, out, hw):
                 need_rebuild[0] = 0
         if status == Status.OK:
             stiff_out = stiff_scratch if servo_on else stiffness
-            ncontact, fsum = contact_pass(0.0, law, st, hw, table, stress, stiff_out, True,
-                                          False, not servo_on)
+            ncontact, fsum, omax = contact_pass(0.0, law, st, hw, table, stress, stiff_out,
+                                                True, False, not servo_on)
             fres, ekin = _residuals(force, v, w, mass, inertia)
             out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
             out[2] = ekin
+            out[5] = omax
     out[0] = ncontact
     out[4] = done
     return status

@@ -29,19 +29,20 @@ from pathlib import Path
 import meshio
 import numpy as np
 
+from grainscale.dem.engine import ContactParams
 from grainscale.dem.neighbours import image_table
 from grainscale.dem.state import RVEBatch
 from grainscale.stress import p_q
 
 
-def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0,
-                 friction: float = np.inf):
+def contact_list(batch: RVEBatch, cp: ContactParams, r: int = 0):
     """(i, j, branch d [m], normal force [N], tangential force vector [N]) of contacts.
 
-    The normal force is kn delta, minus the normal dashpot 2 gamma sqrt(m* kn) v_n
-    (v_n > 0 separating, the mean-field strain rate of batch.L included) when gamma > 0;
-    the tangential force the stored history on the current contact plane, capped at
-    friction max(f_n, 0): as the kernel evaluates them (dem/kernel.py, contact_pass)."""
+    The normal force is kn delta (linear) or (2/3) kn delta with kn = 2 E* sqrt(R* delta)
+    (Hertz-Mindlin), minus the normal dashpot 2 gamma sqrt(m* kn) v_n (v_n > 0
+    separating, the mean-field strain rate of batch.L included) when gamma > 0; the
+    tangential force the stored history on the current contact plane, capped at friction
+    max(f_n, 0): as the kernel evaluates them (dem/kernel.py, contact_pass)."""
     h = batch.h[r]
     x = batch.s[r] @ h.T
     table = np.empty((27, 3))
@@ -53,9 +54,14 @@ def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0,
     ri, rj = batch.radius[r][rows_i], batch.radius[r][j]
     overlap = ri + rj - dist
     touch = overlap > 0
-    kn = young * 2.0 * ri * rj / (ri + rj)
-    fn = kn * overlap
+    if cp.hertz:
+        kn = cp.hertz_kn * np.sqrt(ri * rj / (ri + rj) * np.maximum(overlap, 0.0))
+        fn = (2.0 / 3.0) * kn * overlap
+    else:
+        kn = cp.young * 2.0 * ri * rj / (ri + rj)
+        fn = kn * overlap
     n = d / np.where(dist > 0, dist, 1.0)[:, None]
+    gamma = cp.gamma
     if gamma > 0.0:
         L = batch.L[r]
         vrel = batch.v[r][j] - batch.v[r][rows_i] + d @ (0.5 * (L + L.T))
@@ -65,7 +71,7 @@ def contact_list(batch: RVEBatch, young: float, r: int = 0, gamma: float = 0.0,
     ft = batch.ft[r][rows_i, rows_k, :3]
     n, fn, ft = n[touch], fn[touch], ft[touch]
     ft = ft - np.einsum("ca,ca->c", ft, n)[:, None] * n
-    cap = friction * np.maximum(fn, 0.0)
+    cap = cp.friction * np.maximum(fn, 0.0)
     norm = np.linalg.norm(ft, axis=1)
     over = norm > cap
     ft[over] *= (cap[over] / norm[over])[:, None]
@@ -78,11 +84,10 @@ def _write(mesh: meshio.Mesh, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def write_rve_vtk(stem: str | Path, batch: RVEBatch, young: float, r: int = 0,
-                  gamma: float = 0.0, friction: float = np.inf) -> list[Path]:
-    """Write the three snapshot files of RVE r; returns their paths. young [Pa], gamma
-    (the normal dashpot's damping ratio, 0: none) and friction as in
-    engine.ContactParams."""
+def write_rve_vtk(stem: str | Path, batch: RVEBatch, cp: ContactParams,
+                  r: int = 0) -> list[Path]:
+    """Write the three snapshot files of RVE r, its contact forces by the contact law cp;
+    returns their paths."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     h = batch.h[r]
@@ -93,7 +98,7 @@ def write_rve_vtk(stem: str | Path, batch: RVEBatch, young: float, r: int = 0,
         x, [("vertex", np.arange(n).reshape(-1, 1))],
         point_data={"radius": batch.radius[r], "mass": batch.mass[r], "velocity": batch.v[r],
                     "angular_velocity": batch.w[r], "rotation": batch.rot[r]})
-    i, j, d, fn, ft = contact_list(batch, young, r, gamma, friction)
+    i, j, d, fn, ft = contact_list(batch, cp, r)
     start = x[i]
     pts = np.concatenate([start, start + d]) if len(i) else np.zeros((0, 3))
     lines = np.stack([np.arange(len(i)), np.arange(len(i)) + len(i)], axis=1)

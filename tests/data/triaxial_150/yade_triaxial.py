@@ -1,7 +1,7 @@
 """Drained triaxial test of a stored packing in YADE, set up as grainscale's
 element_tests.triaxial; writes the reference curves of tests/dem/test_triaxial.py.
 
-    yade -n -x yade_triaxial.py PACKING OUT [SEED [AXIAL [RATE [ALPHA_R ETA_R]]]]
+    yade -n -x yade_triaxial.py PACKING OUT [SEED [AXIAL [RATE [ALPHA_R ETA_R]]]] [hertz=E,NU]
 
 SEED >= 0 perturbs the grain velocities by ~1e-9 m/s (another realisation of the same
 RVE); -1 (default) starts at rest. Same grains and contact law (FrictMat: kn = 2 E r1 r2 /
@@ -20,6 +20,14 @@ ETA_R, no twisting stiffness) and Law2_ScGeom6D_CohFrictPhys_CohesionMoment with
 useIncrementalForm and always_use_moment_law, so k_r = ALPHA_R ks r1 r2 and |M| <=
 ETA_R min(r1, r2) |f_n|; the time step is then divided by sqrt(1 + ALPHA_R r_max / r_min)
 as grainscale's engine.critical_dt does.
+
+hertz=E,NU (anywhere among the arguments) takes grainscale's `contact_law =
+"hertz_mindlin"` instead: FrictMat(young=E, poisson=NU), Ip2_FrictMat_FrictMat_MindlinPhys
+without restitution (no dashpot) and Law2_ScGeom_MindlinPhys_Mindlin, so f_n = (4/3) E*
+sqrt(R*) delta^(3/2) and k_s = 8 G* a (E* = E/(2 (1 - NU^2)), G* = E/(4 (1 + NU)(2 - NU)));
+dt = 0.3 sqrt(m_min / (E* r_max sqrt(0.01))) (engine.critical_dt at the default
+rve.numerics.max_overlap); the servo's C_kk reads each contact's tangent kn, as the
+linear law's reads its kn.
 """
 import math
 import sys
@@ -38,12 +46,16 @@ from yade.wrapper import (
     InteractionLoop,
     Ip2_CohFrictMat_CohFrictMat_CohFrictPhys,
     Ip2_FrictMat_FrictMat_FrictPhys,
+    Ip2_FrictMat_FrictMat_MindlinPhys,
     Law2_ScGeom6D_CohFrictPhys_CohesionMoment,
     Law2_ScGeom_FrictPhys_CundallStrack,
+    Law2_ScGeom_MindlinPhys_Mindlin,
     NewtonIntegrator,
     PyRunner,
 )
 
+HERTZ = [a for a in sys.argv[1:] if a.startswith("hertz=")]
+sys.argv = [a for a in sys.argv if not a.startswith("hertz=")]
 packing, out = sys.argv[1], sys.argv[2]
 seed = int(sys.argv[3]) if len(sys.argv) > 3 else -1
 E, RATIO, MU, RHO, DAMP = 100e6, 0.8, 0.5, 2650.0, 0.2
@@ -59,7 +71,11 @@ h = np.array([float(v) for v in lines[0].split()]).reshape(3, 3)
 data = np.array([[float(v) for v in ln.split()] for ln in lines[1:] if ln.strip()])
 O.periodic = True
 O.cell.hSize = Matrix3(*h.ravel())
-if ALPHA_R > 0.0:
+if HERTZ:
+    E, NU = (float(v) for v in HERTZ[0].split("=")[1].split(","))
+    mat = O.materials.append(FrictMat(young=E, poisson=NU, frictionAngle=math.atan(MU),
+                                      density=RHO))
+elif ALPHA_R > 0.0:
     mat = O.materials.append(CohFrictMat(
         young=E, poisson=RATIO, frictionAngle=math.atan(MU), density=RHO,
         isCohesive=False, momentRotationLaw=True, alphaKr=ALPHA_R, etaRoll=ETA_R,
@@ -75,7 +91,12 @@ for x, y, z, r in data:
         b.state.vel = Vector3(*rng.normal(0.0, 1e-9, 3))
 m_min = RHO * 4.0 / 3.0 * math.pi * data[:, 3].min() ** 3
 O.dt = 0.3 * math.sqrt(m_min / (E * data[:, 3].max()))
-if ALPHA_R > 0.0:
+if HERTZ:
+    E_STAR = E / (2.0 * (1.0 - NU * NU))
+    O.dt = 0.3 * math.sqrt(m_min / (E_STAR * data[:, 3].max() * math.sqrt(0.01)))
+    loop = InteractionLoop([Ig2_Sphere_Sphere_ScGeom()], [Ip2_FrictMat_FrictMat_MindlinPhys()],
+                           [Law2_ScGeom_MindlinPhys_Mindlin()])
+elif ALPHA_R > 0.0:
     O.dt /= math.sqrt(1.0 + ALPHA_R * data[:, 3].max() / data[:, 3].min())
     loop = InteractionLoop(
         [Ig2_Sphere_Sphere_ScGeom6D()], [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys()],

@@ -1,0 +1,61 @@
+"""Constants of the Hertz-Mindlin contact law (`[rve] contact_law = "hertz_mindlin"`).
+
+Two elastic spheres of one material (Young's modulus E [Pa], Poisson's ratio nu) pressed
+together by an overlap delta [m] (Johnson, Contact Mechanics, 1985, §4.2 and §7.2):
+
+- reduced radius R* = r_i r_j / (r_i + r_j) [m], contact radius a = sqrt(R* delta) [m];
+- normal force f_n = (4/3) E* sqrt(R*) delta^(3/2) = (2/3) k_n delta [N], with
+  E* = E / (2 (1 - nu^2)) and the tangent normal stiffness k_n = 2 E* a [N/m];
+- tangential stiffness k_t = 8 G* a [N/m] (Mindlin 1949, no micro-slip), with
+  G* = G / (2 (2 - nu)), G = E / (2 (1 + nu)); so k_t / k_n = 2 (1 - nu) / (2 - nu) <= 1.
+
+These are YADE's `Ip2_FrictMat_FrictMat_MindlinPhys` constants (kno = (4/3) E* sqrt(R*),
+kso = 8 sqrt(R*) G*) for one material. The kernels evaluate k_n = HERTZ_KN a with
+HERTZ_KN = 2 E* and k_t = (k_t / k_n) k_n.
+
+Dashpot (only where a restitution e < 1 is given): c_n = 2 beta sqrt(m* k_n) on the
+normal relative velocity, Tsuji et al. (1992)'s form: with k_n ~ delta^(1/2) a binary
+collision restitutes the same e at every impact speed (`beta_of_restitution`).
+"""
+
+from __future__ import annotations
+
+import math
+
+HERTZ_TIME = 2.94328  # 2 int_0^1 dx / sqrt(1 - x^(5/2)): t_c = HERTZ_TIME delta_max / v0
+
+
+def effective_modulus(young: float, poisson: float) -> float:
+    """E* = E / (2 (1 - nu^2)) of two spheres of one material [Pa]."""
+    return young / (2.0 * (1.0 - poisson * poisson))
+
+
+def effective_shear_modulus(young: float, poisson: float) -> float:
+    """G* = G / (2 (2 - nu)), G = E / (2 (1 + nu)), of one material [Pa]."""
+    return young / (2.0 * (1.0 + poisson)) / (2.0 * (2.0 - poisson))
+
+
+def stiffness_ratio(poisson: float) -> float:
+    """k_t / k_n = 8 G* / (2 E*) = 2 (1 - nu) / (2 - nu) [-]."""
+    return 2.0 * (1.0 - poisson) / (2.0 - poisson)
+
+
+def contact_time(young: float, poisson: float, r_i: float, r_j: float, m_i: float,
+                 m_j: float, v0: float) -> float:
+    """Duration of an elastic head-on collision at approach speed v0 [m/s] (Hertz):
+    t_c = 2.94328 delta_max / v0, delta_max = (15 m* v0^2 / (16 E* sqrt(R*)))^(2/5) [s]."""
+    es = effective_modulus(young, poisson)
+    rs = r_i * r_j / (r_i + r_j)
+    ms = m_i * m_j / (m_i + m_j)
+    dmax = (15.0 * ms * v0 * v0 / (16.0 * es * math.sqrt(rs))) ** 0.4
+    return HERTZ_TIME * dmax / v0
+
+
+def beta_of_restitution(restitution: float) -> float:
+    """The damping ratio beta of the Hertzian dashpot c_n = 2 beta sqrt(m* k_n) whose
+    binary collision restitutes `restitution` e in (0, 1] [-] (Tsuji et al. 1992):
+    beta = sqrt(5/6) gamma, gamma = -ln e / sqrt(pi^2 + ln^2 e) the linear dashpot's
+    ratio. Integrating the collision itself gives e to 3e-6 over e = 0.05-0.99
+    (tests/dem/test_hertz.py); 0 for e = 1."""
+    le = math.log(restitution)
+    return math.sqrt(5.0 / 6.0) * (-le / math.sqrt(math.pi**2 + le * le))
