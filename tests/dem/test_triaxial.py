@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from dem_helpers import SMALL_PARAMS
 
+from grainscale.config.case import load_rve_case
 from grainscale.config.rve import RVEParams, TriaxialTest
 from grainscale.dem import element_tests
 from grainscale.dem.state import from_packing
@@ -191,6 +192,43 @@ def test_triaxial_800_with_rolling_resistance_against_yade(eta):
     early = ref[:, 0] < 0.0101
     np.testing.assert_allclose(qp[early], ref[early, 1], rtol=0, atol=6e-3)
     np.testing.assert_allclose(ev[early], ref[early, 2], rtol=0, atol=1.5e-4)
+    peak, ref_peak = smooth(qp, 5).max(), smooth(ref[:, 1], 5).max()
+    assert abs(peak / ref_peak - 1.0) < 0.05, (peak, ref_peak)
+    last = a > a[-1] - 0.05
+    residual, ref_residual = qp[last].mean(), ref[last, 1].mean()
+    assert abs(residual / ref_residual - 1.0) < 0.10, (residual, ref_residual)
+    for strain in (0.1, 0.2):
+        k = int(np.argmin(np.abs(a - strain)))
+        assert abs(ev[k] - ref[k, 2]) < 0.01, (strain, ev[k], ref[k, 2])
+
+
+@pytest.mark.validation
+def test_triaxial_800_hertz_mindlin_against_yade():
+    """The seed's 800-sphere RVE with Hertz-Mindlin contacts (examples/rve/hertz_mindlin.toml:
+    E = 70 GPa, nu = 0.25; its packing in tests/data/triaxial_800_hertz, generated with that
+    law at 100 kPa) to 30 % axial strain at 0.25 /s, against the same test of the same
+    packing in YADE 2023.02a (Ip2_FrictMat_FrictMat_MindlinPhys, Law2_ScGeom_MindlinPhys_
+    Mindlin, same time step, damping and servo; README there): the smoothed peak of q/p
+    within 5 %, the residual (mean over the last 5 % of strain) within 10 % and eps_v
+    within 0.01 at 10 and 20 % (the issue's bands; measured 2.5 %, 1.1 %, 0.0005 and
+    0.0075). One realisation each, from rest. Stiff grains (stiffness number ~5000) reach
+    q/p 0.94 within 0.2 % strain and slip events part the two runs from 0.6 % on, so the
+    row-by-row agreement is checked on the first two rows only (measured 3e-3 in q/p,
+    1e-5 in eps_v): a law off by its 2/3 or E for E* moves them by > 0.02 and 1e-4."""
+    path = Path(__file__).resolve().parents[2] / "examples" / "rve" / "hertz_mindlin.toml"
+    case = load_rve_case(path)
+    h, centres, radii = read_packing(DATA.parent / "triaxial_800_hertz" / "packing.txt")
+    b = from_packing(h, centres, radii, case.rve.density)
+    rows = element_tests.triaxial(b, case.rve, case.triaxial)
+    a = np.array([r["axial_strain"] for r in rows])[1:]
+    qp = np.array([r["q_over_p"] for r in rows])[1:]
+    ev = np.array([r["volumetric_strain"] for r in rows])[1:]
+    ref = np.loadtxt(DATA.parent / "triaxial_800_hertz" / "yade_0.csv", delimiter=",",
+                     skiprows=1)[1:]
+    assert len(ref) == len(a)
+    np.testing.assert_allclose(a, ref[:, 0], rtol=0, atol=1e-5)  # the same time step
+    np.testing.assert_allclose(qp[:2], ref[:2, 1], rtol=0, atol=5e-3)
+    np.testing.assert_allclose(ev[:2], ref[:2, 2], rtol=0, atol=3e-5)
     peak, ref_peak = smooth(qp, 5).max(), smooth(ref[:, 1], 5).max()
     assert abs(peak / ref_peak - 1.0) < 0.05, (peak, ref_peak)
     last = a > a[-1] - 0.05

@@ -205,11 +205,12 @@ def _positions(h, s, x, force, torque):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, commit=True,
-                 full_moduli=False):
+def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenise,
+                 commit=True, full_moduli=False):
     """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
     configuration; hw the history's components a slot (st.ft.shape[2]: 3, or 6 with rolling
-    resistance), given as a constant; table is (27,3) scratch for the image shifts.
+    resistance) and hertz (1: Hertz-Mindlin, law.hertz_kn > 0; 0: linear), given as
+    constants; table is (27,3) scratch for the image shifts.
 
     Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
     c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
@@ -236,6 +237,7 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
     young, kt_ratio, friction, gamma = law.young, law.kt_ratio, law.friction, law.gamma
     alpha_r, eta_r, hz = law.rolling_stiffness, law.rolling_friction, law.hertz_kn
     literally(hw)  # a compile-time constant: a width read at run time cost 10 % a step
+    literally(hertz)  # as a run-time test, the linear law's branch cost it 1 % a step
     rolling = hw == 6  # without it the moment's code is not compiled in
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
     nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
@@ -300,7 +302,7 @@ def contact_pass(dt, law, st, hw, table, stress_out, stiff_out, homogenise, comm
             n0 = d0 * inv
             n1 = d1 * inv
             n2 = d2 * inv
-            if hz > 0.0:  # Hertz: kn the tangent stiffness 2 E* a, a = sqrt(R* delta)
+            if hertz == 1:  # Hertz: kn the tangent stiffness 2 E* a, a = sqrt(R* delta)
                 ovl = (rr - dist) * rr / (ri * rj)  # delta / R*
                 kn = hz * ri * rj * dist * inv2 * math.sqrt(ovl)
                 fn = (2.0 / 3.0) * kn * (rr - dist)
@@ -586,19 +588,25 @@ def _residuals(force, v, w, mass, inertia):
 
 @njit(cache=True)
 def advance_rve(nsteps, law, st, ctl, out):
-    """_advance_rve with the history's width as a constant (one compiled kernel for the
-    plain contact law, one for rolling resistance)."""
-    if st.ft.shape[2] == 6:
-        return _advance_rve(nsteps, law, st, ctl, out, 6)
-    return _advance_rve(nsteps, law, st, ctl, out, 3)
+    """_advance_rve with the history's width and the contact law as constants (one
+    compiled kernel for each of the four variants a batch can need)."""
+    hw = 6 if st.ft.shape[2] == 6 else 3
+    if law.hertz_kn > 0.0:
+        if hw == 6:
+            return _advance_rve(nsteps, law, st, ctl, out, 6, 1)
+        return _advance_rve(nsteps, law, st, ctl, out, 3, 1)
+    if hw == 6:
+        return _advance_rve(nsteps, law, st, ctl, out, 6, 0)
+    return _advance_rve(nsteps, law, st, ctl, out, 3, 0)
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _advance_rve(nsteps, law, st, ctl, out, hw):
+def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
     """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
     ctl.dt [s]; see the module docstring.
 
-    `hw` is the history's width (literal 3 or 6; advance_rve). `out` (6,) receives:
+    `hw` is the history's width (literal 3 or 6) and `hertz` the law (literal 1:
+    Hertz-Mindlin, 0: linear; advance_rve). `out` (6,) receives:
     contacts, unbalanced-force ratio, kinetic energy [J], the row
     length a list build asked for, steps done, the largest overlap delta/R* (Hertz-Mindlin;
     0 for the linear law). Returns a status code (0 = ok). After the
@@ -685,10 +693,10 @@ def _advance_rve(nsteps, law, st, ctl, out, hw):
         # caller's stress is evaluated after the loop, at the end of the increment (8)
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
         if sample:  # two specialisations: the hot one keeps no stress sums live
-            ncontact, fsum, _ = contact_pass(dt, law, st, hw, table, stress_servo,
+            ncontact, fsum, _ = contact_pass(dt, law, st, hw, hertz, table, stress_servo,
                                              stiffness, True)
         else:
-            ncontact, fsum, _ = contact_pass(dt, law, st, hw, table, stress_servo,
+            ncontact, fsum, _ = contact_pass(dt, law, st, hw, hertz, table, stress_servo,
                                              stiff_scratch, False)
         step_count[0] += 1
         # 5. new cell, its inverse for the position update
@@ -733,8 +741,8 @@ def _advance_rve(nsteps, law, st, ctl, out, hw):
                 need_rebuild[0] = 0
         if status == Status.OK:
             stiff_out = stiff_scratch if servo_on else stiffness
-            ncontact, fsum, omax = contact_pass(0.0, law, st, hw, table, stress, stiff_out,
-                                                True, False, not servo_on)
+            ncontact, fsum, omax = contact_pass(0.0, law, st, hw, hertz, table, stress,
+                                                stiff_out, True, False, not servo_on)
             fres, ekin = _residuals(force, v, w, mass, inertia)
             out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
             out[2] = ekin
@@ -761,7 +769,11 @@ def advance_batch(nsteps, law, st, ctl, status, out):
     which thread takes it.
     """
     nthr = max(1, min(get_num_threads(), st.s.shape[0]))
-    split = _advance_split_rolling if st.ft.shape[3] == 6 else _advance_split
+    rolling = st.ft.shape[3] == 6
+    if law.hertz_kn > 0.0:
+        split = _advance_split_hertz_rolling if rolling else _advance_split_hertz
+    else:
+        split = _advance_split_rolling if rolling else _advance_split
     split(nsteps, law, st, ctl, status, out, split_by_cost(nsteps, nthr))
 
 
@@ -786,21 +798,40 @@ def split_by_cost(nsteps, nthr):
     return bounds
 
 
+# advance_batch's loop, one function per variant (history width, contact law), so that
+# compiling one never compiles another (each would add the kernels' cold compile): lane
+# t advances RVEs bounds[t] .. bounds[t + 1] - 1
 @njit(cache=True, parallel=True)
 def _advance_split(nsteps, law, st, ctl, status, out, bounds):
-    """advance_batch's loop: lane t advances RVEs bounds[t] .. bounds[t + 1] - 1 (the
-    plain contact law: its own function, so that compiling it never compiles the
-    rolling variant, which would double the kernels' cold compile)."""
+    """The linear law without rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
             status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                     out[r], 3)
+                                     out[r], 3, 0)
 
 
 @njit(cache=True, parallel=True)
 def _advance_split_rolling(nsteps, law, st, ctl, status, out, bounds):
-    """_advance_split with rolling resistance (6 history components a slot)."""
+    """The linear law with rolling resistance (6 history components a slot)."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
             status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                     out[r], 6)
+                                     out[r], 6, 0)
+
+
+@njit(cache=True, parallel=True)
+def _advance_split_hertz(nsteps, law, st, ctl, status, out, bounds):
+    """Hertz-Mindlin without rolling resistance."""
+    for t in prange(bounds.shape[0] - 1):
+        for r in range(bounds[t], bounds[t + 1]):
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
+                                     out[r], 3, 1)
+
+
+@njit(cache=True, parallel=True)
+def _advance_split_hertz_rolling(nsteps, law, st, ctl, status, out, bounds):
+    """Hertz-Mindlin with rolling resistance."""
+    for t in prange(bounds.shape[0] - 1):
+        for r in range(bounds[t], bounds[t + 1]):
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
+                                     out[r], 6, 1)
