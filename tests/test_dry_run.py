@@ -88,6 +88,30 @@ def test_check_warns_of_a_valid_case_its_author_likely_does_not_want(tmp_path):
         gs.check(case)
 
 
+def test_check_warns_of_hertzian_overlaps_near_the_bound(tmp_path):
+    """Hertz-Mindlin grains too soft for max_overlap at the preparation pressure are
+    warned, naming the key; glass-like grains (E = 70 GPa at the column's ~1 kPa and at
+    100 kPa, hertz.largest_overlap 0.004) are not. The estimate is the measured
+    largest overlap of examples/rve/hertz_mindlin.toml's packing, 3.8e-3 of R* at
+    100 kPa, to 5 %."""
+    import tomllib
+
+    import grainscale as gs
+    from grainscale.dem import hertz
+
+    case = small_column(tmp_path)
+    data = tomllib.loads(case.read_text())
+    data["materials"]["sand"]["retile_width"] = 0.0
+    data["bodies"][0].update(hi=[0.04, 0.01, 0.04])
+    data["rve"].pop("stiffness_ratio", None)
+    data["rve"].update(contact_law="hertz_mindlin", poisson_ratio=0.25, young_modulus=70e9)
+    assert gs.check(_write(case, data))["warnings"] == []
+    data["rve"]["young_modulus"] = 1e8
+    warn = gs.check(_write(case, data))["warnings"]
+    assert len(warn) == 1 and warn[0].startswith("rve.numerics.max_overlap = 0.01"), warn
+    assert hertz.largest_overlap(100e3, 70e9, 0.25) == pytest.approx(3.82e-3, rel=0.05)
+
+
 def _write(path: Path, data: dict) -> Path:
     import tomli_w
 

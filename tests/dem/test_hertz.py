@@ -270,3 +270,23 @@ def test_case_keys_of_the_law():
     assert "contact_law" not in key and "max_overlap" not in key["numerics"]
     hz = RVEParams(contact_law="hertz_mindlin", poisson_ratio=0.2).recipe()
     assert hz["contact_law"] == "hertz_mindlin" and "stiffness_ratio" not in hz
+
+
+def test_a_hertzian_packing_is_generated_at_its_pressure():
+    """generate() with the Hertz-Mindlin law: a static packing at the target pressure
+    (each stress component within the servo's 1 % of it, as consolidate() requires) whose
+    largest overlap is the Hertzian one of that pressure (hertz.largest_overlap within a
+    factor 2: 100 spheres scatter more than 800), far below max_overlap."""
+    from grainscale.dem.generate import contact_params, generate
+
+    params = RVEParams(particles=100, contact_law="hertz_mindlin", young_modulus=70e9,
+                       poisson_ratio=0.25, preparation={"pressure": 50e3})
+    b = generate(params)
+    assert np.allclose(b.stress[0], -50e3 * np.eye(3), atol=0.01 * 50e3)
+    cp = contact_params(params)
+    i, j, d, _, _ = contact_list(b, cp)
+    ri, rj = b.radius[0][i], b.radius[0][j]
+    ovl = ((ri + rj - np.linalg.norm(d, axis=1)) * (ri + rj) / (ri * rj)).max()
+    est = hertz.largest_overlap(50e3, 70e9, 0.25)
+    assert 0.5 * est < ovl < 2.0 * est
+    assert ovl < 0.3 * cp.max_overlap

@@ -34,7 +34,10 @@ that is valid but likely not what its author wants (docs/guide.md):
   resolved (a one-cell slice between walls, an axis of 1-2 cells, is not warned);
 - an RVE cell that retiles early: its packing's narrowest width W0 (mean diameters)
   under RETILE_EARLY x `retile_width`, i.e. a stretch of W0 / retile_width (< 1.25)
-  across a face pair doubles the cell (8 x the spheres at most, `retile_max_factor`).
+  across a face pair doubles the cell (8 x the spheres at most, `retile_max_factor`);
+- Hertz-Mindlin grains whose largest overlap at the preparation pressure
+  (hertz.largest_overlap) exceeds half of `rve.numerics.max_overlap`: a run that
+  doubles the stress would stop at the bound.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ import numpy as np
 
 from grainscale.config.case import Case
 from grainscale.config.rve import min_particles
-from grainscale.dem import engine
+from grainscale.dem import engine, hertz
 from grainscale.dem.cell import perpendicular_widths
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import concatenate
@@ -169,6 +172,17 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
                 f"{w:.3g} mean diameters wide, so a stretch of {w / cfg.retile_width:.3g} "
                 "across a face pair doubles it (up to retile_max_factor x the spheres); "
                 "more rve.particles, or a smaller retile_width (docs/coupling.md)")
+    rve = case.rve
+    if rve is not None and rve.contact_law == "hertz_mindlin" and counts:
+        est = hertz.largest_overlap(rve.preparation.pressure, rve.young_modulus,
+                                    rve.poisson_ratio)
+        if est > 0.5 * rve.numerics.max_overlap:
+            warnings.append(
+                f"rve.numerics.max_overlap = {rve.numerics.max_overlap:g}: at "
+                f"rve.preparation.pressure = {rve.preparation.pressure:g} Pa the largest "
+                f"Hertzian overlap is about {est:.3g} of R*, and a run that doubles the "
+                "stress stops past max_overlap; raise it (a shorter DEM step) or stiffer "
+                "grains (rve.young_modulus)")
     c = max(speeds) if speeds else 0.0
     dt = case.solver.dt if case.solver.dt is not None else (
         case.solver.cfl * h_min / c if c > 0 else math.nan)
@@ -189,7 +203,6 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
                                  * d["wall_per_particle_step"])
         m["memory_bytes"] = m["rves"] * d["bytes_per_rve"]
         wall += m["dem_wall_seconds"]
-    rve = case.rve
     smallest = min_particles(rve.radius_min, rve.radius_max,
                              rve.preparation.initial_porosity, 3.0) if rve else None
     return {"title": case.title, "points": sum(counts.values()), "h_min": h_min,

@@ -215,8 +215,9 @@ def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenis
     Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
     c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
     restitution coefficient (0: elastic); with law.hertz_kn = 2 E* > 0 (Hertz-Mindlin)
-    kn = 2 E* sqrt(R* delta) is the tangent stiffness and the elastic part (2/3) kn delta. The dashpot is not clipped, so an isolated
-    collision returns exactly e; the Coulomb cap uses max(f_n, 0).
+    kn = 2 E* sqrt(R* delta) is the tangent stiffness and the elastic part (2/3) kn delta.
+    The dashpot is not clipped, so an isolated collision returns exactly e; the Coulomb
+    cap uses max(f_n, 0).
 
     Updates the tangential history by dt if `commit` (else the history is only read: with
     dt = 0 it is then the read-only force evaluation of the current state, projected onto
