@@ -290,3 +290,13 @@ def test_a_hertzian_packing_is_generated_at_its_pressure():
     est = hertz.largest_overlap(50e3, 70e9, 0.25)
     assert 0.5 * est < ovl < 2.0 * est
     assert ovl < 0.3 * cp.max_overlap
+    # the contacts the VTK snapshot writes (rve_vtk.contact_list) are the kernel's:
+    # (1/V) sum d (x) f of them is its Love-Weber stress once the grains are at rest
+    b.v[:] = 0.0
+    b.w[:] = 0.0
+    engine.refresh(b, cp)
+    i, j, d, fn, ft = contact_list(b, cp)
+    n = d / np.linalg.norm(d, axis=1)[:, None]
+    f = ft - fn[:, None] * n  # the force on i
+    sigma = np.einsum("ca,cb->ab", d, f) / np.linalg.det(b.h[0])
+    np.testing.assert_allclose(sigma, b.stress[0], rtol=0, atol=1e-9 * 50e3)
