@@ -1,6 +1,7 @@
 """Checkpoints that check themselves: checksums, the fallback to the previous checkpoint,
 and a resume refused when the case's physics changed (issue 13, item 2)."""
 
+import json
 import os
 import shutil
 import textwrap
@@ -371,3 +372,31 @@ def test_a_key_added_since_the_checkpoint_at_its_neutral_value_is_no_change():
     assert [k for k, _, _ in changed_keys(old, new)] == ["materials.sand.update_tolerance"]
     assert [k for k, _, _ in changed_keys(new, old)] == [
         "materials.sand.update_tolerance", "materials.sand.max_deferred_steps"]
+
+
+def test_a_checkpoint_from_before_hertz_mindlin_resumes_and_a_hertzian_case_round_trips():
+    """The [rve] keys that came with Hertz-Mindlin (contact_law, poisson_ratio,
+    numerics.max_overlap), absent from an older checkpoint's case, are no change while
+    the law is the linear one; switching to Hertz-Mindlin is. A Hertzian case's record
+    (and case.resolved.toml) holds no stiffness_ratio, which the law refuses: it reads
+    back as the same case."""
+    import grainscale as gs
+    from grainscale.config.rve import RVEParams
+    from grainscale.coupling.checkpoints import case_record, changed_keys
+
+    case = gs.load_case(Path(__file__).parents[1] / "examples" / "column_collapse"
+                        / "quick.toml")
+    new = case_record(case)
+    old = json.loads(json.dumps(new))
+    for k in ("contact_law", "poisson_ratio"):
+        del old["rve"][k]
+    del old["rve"]["numerics"]["max_overlap"]
+    assert changed_keys(old, new) == []
+    new["rve"].update(contact_law="hertz_mindlin", poisson_ratio=0.25)
+    assert {k for k, _, _ in changed_keys(old, new)} >= {"rve.contact_law",
+                                                         "rve.poisson_ratio"}
+    hz = RVEParams(contact_law="hertz_mindlin", poisson_ratio=0.25, young_modulus=70e9)
+    dumped = hz.model_dump(mode="json")
+    assert "stiffness_ratio" not in dumped
+    assert RVEParams(**dumped) == hz
+    assert "stiffness_ratio" in RVEParams().model_dump()

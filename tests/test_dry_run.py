@@ -1,6 +1,7 @@
 """`grainscale check` (coupling/dry_run.py): a case's counts and cost without running it,
 against a run of the same case."""
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -90,10 +91,9 @@ def test_check_warns_of_a_valid_case_its_author_likely_does_not_want(tmp_path):
 
 def test_check_warns_of_hertzian_overlaps_near_the_bound(tmp_path):
     """Hertz-Mindlin grains too soft for max_overlap at the preparation pressure are
-    warned, naming the key; glass-like grains (E = 70 GPa at the column's ~1 kPa and at
-    100 kPa, hertz.largest_overlap 0.004) are not. The estimate is the measured
-    largest overlap of examples/rve/hertz_mindlin.toml's packing, 3.8e-3 of R* at
-    100 kPa, to 5 %."""
+    warned, naming the key; glass-like grains (E = 70 GPa) are not. The estimate
+    (hertz.largest_overlap) is the largest overlap of examples/rve/hertz_mindlin.toml's
+    stored packing at 100 kPa (tests/data/triaxial_800_hertz), measured here, to 5 %."""
     import tomllib
 
     import grainscale as gs
@@ -109,6 +109,21 @@ def test_check_warns_of_hertzian_overlaps_near_the_bound(tmp_path):
     data["rve"]["young_modulus"] = 1e8
     warn = gs.check(_write(case, data))["warnings"]
     assert len(warn) == 1 and warn[0].startswith("rve.numerics.max_overlap = 0.01"), warn
+    assert "at rve.preparation.pressure" in warn[0]
+    from grainscale.config.case import load_rve_case
+    from grainscale.dem import engine
+    from grainscale.dem.generate import contact_params
+    from grainscale.dem.state import from_packing
+    from grainscale.io.packing import read_packing
+
+    root = Path(__file__).parents[1]
+    params = load_rve_case(root / "examples" / "rve" / "hertz_mindlin.toml").rve
+    h, x, r = read_packing(root / "tests" / "data" / "triaxial_800_hertz" / "packing.txt")
+    b = from_packing(h, x, r, params.density)
+    cp = contact_params(params)
+    out = engine.refresh(b, cp)
+    with pytest.raises(engine.RVEError, match=r"delta/R\* = 0.00382"):
+        engine.refresh(out, dataclasses.replace(cp, max_overlap=1e-3))
     assert hertz.largest_overlap(100e3, 70e9, 0.25) == pytest.approx(3.82e-3, rel=0.05)
 
 

@@ -201,9 +201,11 @@ def test_a_frictionless_packing_keeps_its_hertzian_energy():
     """27 spheres on a squeezed cubic lattice (overlaps up to ~4 % of R*) with random
     velocities, no damping, no friction: kinetic plus elastic energy, sum (2/5) f_n delta
     (the Hertz potential, whose derivative is f_n = (4/3) E* sqrt(R*) delta^(3/2)),
-    stays constant while the grains exchange it. A force inconsistent with the potential
-    (kn delta for (2/3) kn delta) breaks the balance by tens of %; the leapfrog's shadow
-    energy oscillates by O((omega dt)^2) ~ 1e-3 at safety 0.05, so 1 %."""
+    stays constant while the grains exchange most of it. The leapfrog's velocities lag
+    the positions by dt/2, so they are brought to the positions' time, v + (dt/2) F/m,
+    before the kinetic energy is taken (as test_kinematics does): the total then holds
+    to ~4e-5 (measured); 1e-3. A force inconsistent with the potential (k_n delta for
+    (2/3) k_n delta) breaks the balance by tens of %."""
     rng = np.random.default_rng(3)
     spacing = 1.98e-3
     g = np.arange(3) * spacing + 1e-3
@@ -216,10 +218,12 @@ def test_a_frictionless_packing_keeps_its_hertzian_energy():
     ctrl = engine.rate_control(1)
 
     def energies():
-        engine.refresh(b, p)
+        v = b.v[0].copy()
+        engine.refresh(b, p)  # forces of the current positions, v left as it is
+        v += 0.5 * dt * b.force[0] / b.mass[0][:, None]
         i, j, d, fn, _ = contact_list(b, p)
         delta = b.radius[0][i] + b.radius[0][j] - np.linalg.norm(d, axis=1)
-        return 0.5 * float(b.mass[0] @ (b.v[0] ** 2).sum(1)), 0.4 * float(fn @ delta)
+        return 0.5 * float(b.mass[0] @ (v**2).sum(1)), 0.4 * float(fn @ delta)
 
     kin0, pot0 = energies()
     assert pot0 > 0.2 * kin0
@@ -230,8 +234,8 @@ def test_a_frictionless_packing_keeps_its_hertzian_energy():
         k, u = energies()
         total.append(k + u)
         kinetic.append(k)
-    assert np.ptp(total) < 0.01 * (kin0 + pot0)
-    assert abs(np.mean(total) - (kin0 + pot0)) < 0.01 * (kin0 + pot0)
+    assert np.ptp(total) < 1e-3 * (kin0 + pot0)
+    assert abs(np.mean(total) - (kin0 + pot0)) < 1e-3 * (kin0 + pot0)
     assert np.ptp(kinetic) > 0.2 * (kin0 + pot0)  # the grains did exchange it
 
 
@@ -266,6 +270,8 @@ def test_case_keys_of_the_law():
         RVEParams(poisson_ratio=0.2)
     with pytest.raises(ValueError, match="poisson_ratio"):
         RVEParams(contact_law="hertz_mindlin", poisson_ratio=0.5)
+    with pytest.raises(ValueError, match="numerics.max_overlap = 0.02 has no effect"):
+        RVEParams(numerics={"max_overlap": 0.02})
     key = RVEParams().recipe()
     assert "contact_law" not in key and "max_overlap" not in key["numerics"]
     hz = RVEParams(contact_law="hertz_mindlin", poisson_ratio=0.2).recipe()

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, model_serializer, model_validator
 
 from grainscale.config.base import StrictModel
 
@@ -68,8 +68,8 @@ class Numerics(StrictModel):
                               description="fraction of the stress error corrected a step")
     max_overlap: float = Field(
         0.01, gt=0, le=0.2, description="Hertz-Mindlin: the largest overlap delta/R* the "
-        "time step is set for (k_max = 2 E* R* sqrt(max_overlap)); a larger one stops the "
-        "run with an error naming this key")
+        "time step is set for (k_max = 2 E* R* sqrt(max_overlap)); a larger one at the end "
+        "of a call (an MPM step) stops the run with an error naming this key")
 
 
 class RVEParams(StrictModel):
@@ -100,6 +100,15 @@ class RVEParams(StrictModel):
     preparation: Preparation = Preparation()
     numerics: Numerics = Numerics()
 
+    @model_serializer(mode="wrap")
+    def _no_stiffness_ratio_with_hertz(self, handler):
+        # Hertz-Mindlin refuses stiffness_ratio: writing its default back would make
+        # case.resolved.toml (and a checkpoint's case) a case that _contact_law refuses
+        data = handler(self)
+        if self.contact_law == "hertz_mindlin":
+            data.pop("stiffness_ratio", None)
+        return data
+
     def recipe(self) -> dict:
         """The table as the key of a generated packing (coupling/materials.py): the
         rolling keys only where rolling resistance is on, so that packings made before
@@ -109,8 +118,6 @@ class RVEParams(StrictModel):
             del key["rolling_stiffness"], key["rolling_friction"]
         if self.contact_law == "linear":
             del key["contact_law"], key["poisson_ratio"], key["numerics"]["max_overlap"]
-        else:
-            del key["stiffness_ratio"]
         return key
 
     @model_validator(mode="after")
@@ -129,6 +136,11 @@ class RVEParams(StrictModel):
             raise ValueError(
                 f"poisson_ratio = {self.poisson_ratio!r} has no effect with contact_law = "
                 "'linear'; remove it, or use contact_law = 'hertz_mindlin'")
+        elif "max_overlap" in self.numerics.model_fields_set:
+            raise ValueError(
+                f"numerics.max_overlap = {self.numerics.max_overlap!r} has no effect with "
+                "contact_law = 'linear' (its step is set by kn = E r*); remove it, or use "
+                "contact_law = 'hertz_mindlin'")
         return self
 
     @model_validator(mode="after")

@@ -35,9 +35,9 @@ that is valid but likely not what its author wants (docs/guide.md):
 - an RVE cell that retiles early: its packing's narrowest width W0 (mean diameters)
   under RETILE_EARLY x `retile_width`, i.e. a stretch of W0 / retile_width (< 1.25)
   across a face pair doubles the cell (8 x the spheres at most, `retile_max_factor`);
-- Hertz-Mindlin grains whose largest overlap at the preparation pressure
-  (hertz.largest_overlap) exceeds half of `rve.numerics.max_overlap`: a run that
-  doubles the stress would stop at the bound.
+- Hertz-Mindlin grains whose largest overlap (hertz.largest_overlap) at the highest
+  pressure a packing is prepared at (the preparation's or a geostatic library's) exceeds
+  half of `rve.numerics.max_overlap`: a run that doubles the stress would stop there.
 """
 
 from __future__ import annotations
@@ -174,15 +174,21 @@ def check(case: Case, dem_steps: float | None = None) -> dict:
                 "more rve.particles, or a smaller retile_width (docs/coupling.md)")
     rve = case.rve
     if rve is not None and rve.contact_law == "hertz_mindlin" and counts:
-        est = hertz.largest_overlap(rve.preparation.pressure, rve.young_modulus,
-                                    rve.poisson_ratio)
+        # the highest pressure a packing is prepared at: the preparation's, or a
+        # geostatic library's deepest level
+        key, p = "rve.preparation.pressure", rve.preparation.pressure
+        for name, cfg in case.materials.items():
+            if cfg.type == "dem" and counts.get(name) and cfg.geostatic_pressures:
+                if max(cfg.geostatic_pressures) > p:
+                    key, p = f"materials.{name}.geostatic_pressures", max(
+                        cfg.geostatic_pressures)
+        est = hertz.largest_overlap(p, rve.young_modulus, rve.poisson_ratio)
         if est > 0.5 * rve.numerics.max_overlap:
             warnings.append(
-                f"rve.numerics.max_overlap = {rve.numerics.max_overlap:g}: at "
-                f"rve.preparation.pressure = {rve.preparation.pressure:g} Pa the largest "
-                f"Hertzian overlap is about {est:.3g} of R*, and a run that doubles the "
-                "stress stops past max_overlap; raise it (a shorter DEM step) or stiffer "
-                "grains (rve.young_modulus)")
+                f"rve.numerics.max_overlap = {rve.numerics.max_overlap:g}: at {key} "
+                f"({p:g} Pa) the largest Hertzian overlap is about {est:.3g} of R*, and a "
+                "run that doubles the stress stops past max_overlap; raise it (a shorter "
+                "DEM step) or stiffer grains (rve.young_modulus)")
     c = max(speeds) if speeds else 0.0
     dt = case.solver.dt if case.solver.dt is not None else (
         case.solver.cfl * h_min / c if c > 0 else math.nan)

@@ -59,7 +59,8 @@ def contact_params(params: RVEParams, friction: float | None = None,
 def jamming_pressure(params: RVEParams) -> float:
     """The pressure [Pa] at which the stiffness number is 2e4 (module docstring, 2): E/p
     for the linear law (kn/(p d) up to a constant), (E*/p)^(2/3) for Hertz-Mindlin
-    (Agnolin & Roux 2007's kappa; overlaps delta/d ~ 1/kappa in both laws)."""
+    (the form of Agnolin & Roux 2007's kappa, whose modulus E/(1 - nu^2) is twice this
+    E*; overlaps delta/d ~ 1/kappa in both laws)."""
     if params.contact_law == "hertz_mindlin":
         return hertz.effective_modulus(params.young_modulus, params.poisson_ratio) / 2e4**1.5
     return params.young_modulus / 2e4

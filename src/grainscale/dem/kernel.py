@@ -757,7 +757,7 @@ def advance_batch(nsteps, law, st, ctl, status, out):
     """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs.
 
     st and ctl hold the batch's arrays (RVE index first); status (R,) receives each RVE's
-    status code and out (R,5) its outputs (see advance_rve).
+    status code and out (R,OUT_WIDTH) its outputs (see advance_rve).
 
     Load balance: the RVEs' costs (proportional to nsteps) can differ by orders of
     magnitude, and the costly ones sit together (quasi-static RVEs near an intruder are
