@@ -118,11 +118,11 @@ def _restitution(beta: float) -> float:
 
 @pytest.mark.parametrize("e", [0.1, 0.5, 0.95])
 def test_tsuji_ratio_restitutes_e_in_the_continuous_collision(e):
-    """beta = sqrt(5/6) gamma (hertz.beta_of_restitution) against an independent
-    integration of the collision it damps: RK4 converges as h^4 but the x^(1/4) term
+    """beta = sqrt(5/6) gamma (engine.ContactParams.gamma of the Hertzian law) against an
+    independent integration of the collision it damps: RK4 converges as h^4 but the x^(1/4) term
     is not smooth at the ends, which leaves ~3e-6 at h = 1e-4; 1e-4 is the bound, and a
     5 % error in beta moves e by > 5e-3."""
-    assert _restitution(hertz.beta_of_restitution(e)) == pytest.approx(e, rel=1e-4)
+    assert _restitution(law(restitution=e).gamma) == pytest.approx(e, rel=1e-4)
 
 
 def test_tangential_loading_follows_mindlin_to_first_order():

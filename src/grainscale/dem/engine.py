@@ -82,12 +82,11 @@ class ContactParams:
     @property
     def gamma(self) -> float:
         """Damping ratio of the normal dashpot c_n = 2 gamma sqrt(m* kn) that restitutes
-        e: -ln e / sqrt(pi^2 + ln^2 e) for a linear spring, sqrt(5/6) times that for a
-        Hertzian one (kn its tangent stiffness; hertz.beta_of_restitution); 0 for e = 1."""
-        if self.hertz:
-            return hertz.beta_of_restitution(self.restitution)
+        e: -ln e / sqrt(pi^2 + ln^2 e) for a linear spring, hertz.TSUJI = sqrt(5/6) times
+        that for a Hertzian one (kn its tangent stiffness); 0 for e = 1."""
         le = math.log(self.restitution)
-        return -le / math.sqrt(math.pi**2 + le * le)
+        gamma = -le / math.sqrt(math.pi**2 + le * le)
+        return hertz.TSUJI * gamma if self.hertz else gamma
 
 
 @dataclass

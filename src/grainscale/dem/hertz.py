@@ -14,8 +14,9 @@ kso = 8 sqrt(R*) G*) for one material. The kernels evaluate k_n = HERTZ_KN a wit
 HERTZ_KN = 2 E* and k_t = (k_t / k_n) k_n.
 
 Dashpot (only where a restitution e < 1 is given): c_n = 2 beta sqrt(m* k_n) on the
-normal relative velocity, Tsuji et al. (1992)'s form: with k_n ~ delta^(1/2) a binary
-collision restitutes the same e at every impact speed (`beta_of_restitution`).
+normal relative velocity, Tsuji et al. (1992)'s form, beta = TSUJI gamma with gamma =
+-ln e / sqrt(pi^2 + ln^2 e) the linear dashpot's ratio (engine.ContactParams.gamma):
+with k_n ~ delta^(1/2) a binary collision restitutes the same e at every impact speed.
 """
 
 from __future__ import annotations
@@ -23,6 +24,10 @@ from __future__ import annotations
 import math
 
 HERTZ_TIME = 2.94328  # 2 int_0^1 dx / sqrt(1 - x^(5/2)): t_c = HERTZ_TIME delta_max / v0
+# Tsuji et al. (1992): the Hertzian dashpot's ratio is sqrt(5/6) times the linear one's
+# for the same restitution; integrating the collision itself gives e to 3e-6 over
+# e = 0.05-0.99 (tests/dem/test_hertz.py)
+TSUJI = math.sqrt(5.0 / 6.0)
 
 
 def effective_modulus(young: float, poisson: float) -> float:
@@ -49,16 +54,6 @@ def contact_time(young: float, poisson: float, r_i: float, r_j: float, m_i: floa
     ms = m_i * m_j / (m_i + m_j)
     dmax = (15.0 * ms * v0 * v0 / (16.0 * es * math.sqrt(rs))) ** 0.4
     return HERTZ_TIME * dmax / v0
-
-
-def beta_of_restitution(restitution: float) -> float:
-    """The damping ratio beta of the Hertzian dashpot c_n = 2 beta sqrt(m* k_n) whose
-    binary collision restitutes `restitution` e in (0, 1] [-] (Tsuji et al. 1992):
-    beta = sqrt(5/6) gamma, gamma = -ln e / sqrt(pi^2 + ln^2 e) the linear dashpot's
-    ratio. Integrating the collision itself gives e to 3e-6 over e = 0.05-0.99
-    (tests/dem/test_hertz.py); 0 for e = 1."""
-    le = math.log(restitution)
-    return math.sqrt(5.0 / 6.0) * (-le / math.sqrt(math.pi**2 + le * le))
 
 
 OVERLAP_SPREAD = 20.0  # largest delta/R* over (p/E*)^(2/3) in a packing at rest
