@@ -78,3 +78,15 @@ def agitated_dense_state(n: int = 48, seed: int = 3, damping: float = 0.0,
     engine.advance(b, compress_steps, dt, p, engine.rate_control(1, l_ctrl=lc, max_rate=100.0))
     assert b.ncontact[0] > n // 2, "helper should produce a contact network"
     return b, p, dt
+
+
+def contact_interval(gaps) -> tuple[float, float, int, int]:
+    """(entry, exit, first, last) of a contact from a pair's gap [m] sampled once a step:
+    the step indices of the first and last negative gap, and the crossings of zero
+    located between steps by linear interpolation (error O(dt^2)), in steps."""
+    g = np.asarray(gaps, float)
+    inside = np.nonzero(g < 0)[0]
+    k0, k1 = int(inside[0]), int(inside[-1])
+    t_in = (k0 - 1) + g[k0 - 1] / (g[k0 - 1] - g[k0])
+    t_out = k1 + g[k1] / (g[k1] - g[k1 + 1])
+    return t_in, t_out, k0, k1

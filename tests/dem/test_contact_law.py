@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from dem_helpers import contact_interval
 
 from grainscale.dem import engine
 from grainscale.dem.state import from_packing
@@ -53,12 +54,7 @@ def test_normal_impact_duration_and_restitution():
         gaps.append(distance(b) - rr)
         if min(gaps) < 0 and gaps[-1] > 2e-6:
             break
-    gaps = np.array(gaps)
-    inside = np.nonzero(gaps < 0)[0]
-    k0, k1 = inside[0], inside[-1]
-    # linear interpolation of the zero crossings of the gap (positions at integer steps)
-    t_in = (k0 - 1) + gaps[k0 - 1] / (gaps[k0 - 1] - gaps[k0])
-    t_out = k1 + gaps[k1] / (gaps[k1] - gaps[k1 + 1])
+    t_in, t_out, k0, k1 = contact_interval(gaps)
     duration = (t_out - t_in) * dt
     kn = YOUNG * 2 * r1 * r2 / rr
     mstar = m1 * m2 / (m1 + m2)

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from dem_helpers import contact_interval
 
 from grainscale.config.rve import RVEParams
 from grainscale.dem import engine, hertz
@@ -49,11 +50,7 @@ def collide(p, v0, dt):
         gaps.append(gap(b))
         if min(gaps) < 0 and gaps[-1] > 1e-7:
             break
-    g = np.array(gaps)
-    inside = np.nonzero(g < 0)[0]
-    k0, k1 = inside[0], inside[-1]
-    t_in = (k0 - 1) + g[k0 - 1] / (g[k0 - 1] - g[k0])
-    t_out = k1 + g[k1] / (g[k1] - g[k1 + 1])
+    t_in, t_out, k0, k1 = contact_interval(gaps)
     vout = b.v[0, 1, 0] - b.v[0, 0, 0]  # separating: > 0
     assert abs(b.mass[0] @ b.v[0, :, 0]) < 1e-12 * m1 * v0  # momentum kept
     return (t_out - t_in) * dt, vout / v0, k1 - k0
