@@ -66,12 +66,13 @@ def test_batch_widths_and_the_edge_to_double():
 
 
 def _batch(n_rve: int, seed: int = 0):
-    """A batch whose every array holds distinct values (so a misplaced row shows)."""
+    """A batch whose every array holds distinct values (so a misplaced row shows); its
+    clump arrays too (2 bodies)."""
     from dataclasses import fields
 
     from grainscale.dem.state import RVEBatch, allocate
 
-    b = allocate(n_rve, 5, 4)
+    b = allocate(n_rve, 5, 4, n_bodies=2)
     rng = np.random.default_rng(seed)
     for f in fields(RVEBatch):
         a = getattr(b, f.name)

@@ -72,6 +72,46 @@ class Numerics(StrictModel):
         "of a call (an MPM step) stops the run with an error naming this key")
 
 
+class ClumpShape(StrictModel):
+    """`[rve.clump]`: the grains are rigid clumps of overlapping spheres (dem/clump.py),
+    each a template scaled by a factor uniform in [radius_min, radius_max] (the radius
+    of its member spheres); `particles` counts clumps."""
+
+    template: Literal["sphere", "elongated", "tetrahedral"] = Field(
+        description="'elongated': `spheres` equal spheres on a line, length/width = "
+        "`aspect`; 'tetrahedral': four spheres on a regular tetrahedron of edge "
+        "`overlap_edge` radii; 'sphere': one sphere (the clump path of a sphere)")
+    aspect: float | None = Field(None, gt=1.0, le=4.0,
+                                 description="length over width ('elongated')")
+    spheres: int | None = Field(None, ge=2, le=8, description="members ('elongated')")
+    overlap_edge: float | None = Field(
+        None, gt=0.0, lt=2.0, description="tetrahedron edge in member radii ('tetrahedral')")
+
+    @model_validator(mode="after")
+    def _keys_of_template(self):
+        used = {"sphere": set(), "elongated": {"aspect", "spheres"},
+                "tetrahedral": {"overlap_edge"}}[self.template]
+        for key in ("aspect", "spheres", "overlap_edge"):
+            if key in self.model_fields_set and key not in used:
+                raise ValueError(f"{key} = {getattr(self, key)!r} has no effect with "
+                                 f"template = {self.template!r}; remove it")
+        if self.template == "elongated" and self.aspect is None:
+            raise ValueError("template = 'elongated' needs aspect (length over width); "
+                             "valid range: (1, 4]")
+        return self
+
+    def shape(self):
+        """The clump.Template (unit member radius) this table names."""
+        from grainscale.dem import clump  # noqa: PLC0415 (numba import cost)
+
+        kw = {k: v for k, v in (("aspect", self.aspect), ("spheres", self.spheres),
+                                ("overlap_edge", self.overlap_edge)) if v is not None}
+        try:
+            return clump.template(self.template, **kw)
+        except ValueError as err:
+            raise ValueError(f"rve.clump: {err}") from None
+
+
 class RVEParams(StrictModel):
     particles: int = Field(800, ge=20, le=10_000_000)
     radius_min: float = Field(3e-3, gt=0, description="smallest radius [m]")
@@ -97,6 +137,8 @@ class RVEParams(StrictModel):
         0.0, ge=0, le=10, description="eta_r in the cap of the rolling moment, |M_r| <= "
         "eta_r min(r_i, r_j) f_n (with rolling_stiffness > 0)")
     seed: int = Field(1, ge=0)
+    clump: ClumpShape | None = Field(
+        None, description="rigid clumps of spheres instead of spheres ([rve.clump])")
     preparation: Preparation = Preparation()
     numerics: Numerics = Numerics()
 
@@ -118,6 +160,8 @@ class RVEParams(StrictModel):
             del key["rolling_stiffness"], key["rolling_friction"]
         if self.contact_law == "linear":
             del key["contact_law"], key["poisson_ratio"], key["numerics"]["max_overlap"]
+        if self.clump is None:
+            del key["clump"]
         return key
 
     @model_validator(mode="after")
@@ -155,6 +199,12 @@ class RVEParams(StrictModel):
                 f"rolling_stiffness = {self.rolling_stiffness!r} with rolling_friction = 0 "
                 "caps every rolling moment at zero; valid: rolling_friction in (0, 10] "
                 "with it, or rolling_stiffness = 0")
+        return self
+
+    @model_validator(mode="after")
+    def _clump_shape(self):
+        if self.clump is not None:
+            self.clump.shape()  # a template that cannot be built is refused here
         return self
 
     @model_validator(mode="after")

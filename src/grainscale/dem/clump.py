@@ -107,6 +107,45 @@ def principal(name: str, centres, radii, resolution: int = RESOLUTION) -> Templa
                     moments)
 
 
+def from_members(centres, radii, resolution: int = RESOLUTION
+                 ) -> tuple[Template, np.ndarray, np.ndarray]:
+    """A clump given by its members' lab centres (k,3) [m] and radii: (its Template, its
+    centre of mass (3,) [m], its orientation, the unit quaternion (4,) that turns the
+    template's principal frame into the lab)."""
+    vol, com, tensor = mass_properties(centres, radii, resolution)
+    moments, axes = np.linalg.eigh(tensor)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1.0
+    offsets = (np.asarray(centres, float).reshape(-1, 3) - com) @ axes
+    t = Template("file", offsets, np.asarray(radii, float).ravel().copy(), float(vol),
+                 moments)
+    return t, com, quaternion_of(axes)
+
+
+def quaternion_of(rot: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method:
+    from its largest of 1 + trace and the diagonal, for accuracy)."""
+    m = np.asarray(rot, float)
+    tr = np.trace(m)
+    k = int(np.argmax([tr, m[0, 0], m[1, 1], m[2, 2]]))
+    if k == 0:
+        w = 0.5 * math.sqrt(1.0 + tr)
+        q = [w, (m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w),
+             (m[1, 0] - m[0, 1]) / (4 * w)]
+    else:
+        i = k - 1
+        j, l = (i + 1) % 3, (i + 2) % 3
+        s = 0.5 * math.sqrt(1.0 + m[i, i] - m[j, j] - m[l, l])
+        q = [0.0, 0.0, 0.0, 0.0]
+        q[0] = (m[l, j] - m[j, l]) / (4 * s)
+        q[1 + i] = s
+        q[1 + j] = (m[j, i] + m[i, j]) / (4 * s)
+        q[1 + l] = (m[l, i] + m[i, l]) / (4 * s)
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
 def template(name: str, aspect: float = 2.0, spheres: int = 2,
              overlap_edge: float = 1.6) -> Template:
     """A named template of unit member radius (module docstring); ValueError naming the

@@ -18,6 +18,7 @@ from grainscale.config.rve import Numerics
 from grainscale.dem import hertz
 from grainscale.dem.kernel import (
     OUT_WIDTH,
+    Clumps,
     ContactLaw,
     Controls,
     RveState,
@@ -28,6 +29,7 @@ from grainscale.dem.state import (
     HISTORY,
     HISTORY_ROLLING,
     RVEBatch,
+    body_lever,
     grow_capacity,
     with_history,
 )
@@ -195,6 +197,14 @@ def rve_arrays(batch: RVEBatch) -> RveState:
     return RveState._make(getattr(batch, name) for name in RveState._fields)
 
 
+def clump_arrays(batch: RVEBatch) -> Clumps | None:
+    """The kernels' Clumps of a clumped batch (its arrays, not copies); None for plain
+    spheres."""
+    if not batch.clumped:
+        return None
+    return Clumps._make(getattr(batch, name) for name in Clumps._fields)
+
+
 def critical_dt(batch: RVEBatch, params: ContactParams,
                 safety: float = Numerics().timestep_safety) -> float:
     """safety x sqrt(m_min / k_max) [s], k_max the stiffest possible contact: E r_max
@@ -208,12 +218,21 @@ def critical_dt(batch: RVEBatch, params: ContactParams,
     held by the tangential spring, kt l_i^2 ~ kt r_i^2, and the rolling spring, alpha_r kt
     r_i r_j: against its inertia 0.4 m_i r_i^2 the rolling spring raises the squared
     frequency of that mode by the factor 1 + alpha_r r_j / r_i <= 1 + alpha_r r_max /
-    r_min, so the step shrinks by its square root (alpha_r = 0: unchanged)."""
+    r_min, so the step shrinks by its square root (alpha_r = 0: unchanged).
+
+    A clump (state.RVEBatch.clumped) is held by its contacts in translation, k/M, and in
+    rotation, k l^2/J_a, with l the largest lever from its centre to its surface
+    (state.body_lever): its mass in the bound is min(M, J_min/l^2) (for a two-sphere
+    grain of aspect 2, 0.35 M, the rotation)."""
     if params.hertz:
         k_max = 0.5 * params.hertz_kn * batch.radius.max() * math.sqrt(params.max_overlap)
     else:
         k_max = params.young * batch.radius.max()
-    dt = safety * float(np.sqrt(batch.mass.min() / k_max))
+    if batch.clumped:
+        m_min = float(np.minimum(batch.bm, batch.bj.min(axis=2) / body_lever(batch)**2).min())
+    else:
+        m_min = float(batch.mass.min())
+    dt = safety * math.sqrt(m_min / k_max)
     if params.rolling_stiffness > 0.0:
         spread = float(batch.radius.max() / batch.radius.min())
         dt /= math.sqrt(1.0 + params.rolling_stiffness * spread)
@@ -270,6 +289,10 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
             raise ValueError(f"the device batch keeps {host.ft.shape[3]} history components "
                              f"a contact, this contact law {params.history}")
         with_history(host, params.history)  # zero moments, or refused if it holds some
+    if not resident and host.clumped and device != "cpu":
+        raise DeviceError(f"solver.device = {device!r}: clumps run on the CPU only; "
+                          "valid: 'cpu'")
+    clumps = clump_arrays(host) if not resident else None
     if resident:
         step_batch = None
     elif device == "cpu":
@@ -301,6 +324,8 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
         call = np.where(remaining > 0, remaining, np.where(owed, -1, 0))
         if resident:
             batch.step(call, law, ctl, status, out)
+        elif clumps is not None:
+            step_batch(call, law, rve_arrays(batch), ctl, status, out, clumps)
         else:
             step_batch(call, law, rve_arrays(batch), ctl, status, out)
         done = out[:, 4].astype(np.int64)

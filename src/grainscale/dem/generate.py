@@ -29,8 +29,8 @@ import numpy as np
 
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams, min_particles
-from grainscale.dem import engine, hertz, homogenise
-from grainscale.dem.state import RVEBatch, from_packing
+from grainscale.dem import clump, engine, hertz, homogenise
+from grainscale.dem.state import RVEBatch, from_clumps, from_packing
 
 
 class GenerationError(ConfigError):
@@ -103,6 +103,55 @@ def insert_random(n: int, rmin: float, rmax: float, porosity: float,
     return np.eye(3) * side, pos, radii
 
 
+def insert_clumps(n: int, rmin: float, rmax: float, shape, porosity: float,
+                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    """n clumps of the template `shape` (clump.Template of unit member radius), each
+    scaled by a factor uniform in [rmin, rmax] and turned at random (uniform on the
+    rotations), in a cubic periodic cell at the given porosity of their solid volume;
+    no member of one overlaps a member of another. Returns (h, centres, quaternions,
+    grains)."""
+    sizes = rng.uniform(rmin, rmax, n)
+    grains = [clump.scaled(shape, s) for s in sizes]
+    reach = float(np.max(np.linalg.norm(shape.offsets, axis=1) + shape.radii))
+    solid = sum(g.volume for g in grains)
+    side = (solid / (1.0 - porosity)) ** (1.0 / 3.0)
+    if side < 8.0 * reach * rmax:
+        raise GenerationError(
+            f"rve.particles = {n} clumps are too few for their size: the cell side "
+            f"{side:.4g} m would be below 8 times their largest reach from the centre "
+            f"{reach * rmax:.4g} m; valid: more clumps")
+    quats = rng.standard_normal((n, 4))  # normalised Gaussian: uniform on rotations
+    quats /= np.linalg.norm(quats, axis=1)[:, None]
+    order = np.argsort(-sizes, kind="stable")
+    pos = np.empty((n, 3))
+    members = np.empty((0, 3))
+    radii = np.empty(0)
+    for placed, idx in enumerate(order):
+        g = grains[idx]
+        w, x, y, z = quats[idx]
+        rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        off = g.offsets @ rot.T
+        for _ in range(100_000):
+            trial = rng.uniform(0.0, side, 3)
+            if placed:
+                d = members[:, None, :] - (trial + off)[None, :, :]
+                d -= side * np.round(d / side)
+                gap = np.einsum("ijk,ijk->ij", d, d) - (radii[:, None] + g.radii[None, :]) ** 2
+                if gap.min() <= 0.0:
+                    continue
+            pos[idx] = trial
+            members = np.concatenate([members, trial + off])
+            radii = np.concatenate([radii, g.radii])
+            break
+        else:
+            raise GenerationError(
+                f"could not insert clump {placed + 1} of {n} without overlap at "
+                f"rve.preparation.initial_porosity = {porosity}; raise it")
+    return np.eye(3) * side, pos, quats, grains
+
+
 def consolidate(batch: RVEBatch, cp: engine.ContactParams, pressure: float, dt: float,
                 max_rate: float, gain: float, unbalanced: float,
                 max_steps: int = 3_000_000, chunk: int = 500, tol: float = 0.01) -> int:
@@ -131,17 +180,25 @@ def consolidate(batch: RVEBatch, cp: engine.ContactParams, pressure: float, dt: 
 
 
 def generate(params: RVEParams, progress=None) -> RVEBatch:
-    """A consolidated packing (batch of one RVE) as the [rve] table asks.
+    """A consolidated packing (batch of one RVE) as the [rve] table asks; with
+    [rve.clump] of params.particles clumps of its template, each scaled by a factor
+    uniform in [radius_min, radius_max] (insert_clumps).
 
     `progress(text)` is called with a status line after each stage if given.
     """
     prep = params.preparation
     say = progress or (lambda text: None)
     rng = np.random.default_rng(params.seed)
-    h, pos, radii = insert_random(params.particles, params.radius_min, params.radius_max,
-                                  prep.initial_porosity, rng)
     cp = contact_params(params, damping=prep.damping)
-    batch = from_packing(h, pos, radii, params.density, history=cp.history)
+    if params.clump is None:
+        h, pos, radii = insert_random(params.particles, params.radius_min,
+                                      params.radius_max, prep.initial_porosity, rng)
+        batch = from_packing(h, pos, radii, params.density, history=cp.history)
+    else:
+        h, pos, quats, grains = insert_clumps(params.particles, params.radius_min,
+                                              params.radius_max, params.clump.shape(),
+                                              prep.initial_porosity, rng)
+        batch = from_clumps(h, pos, quats, grains, params.density, history=cp.history)
     dt = engine.critical_dt(batch, cp, params.numerics.timestep_safety)
     mu = params.friction if prep.compaction_friction is None else prep.compaction_friction
 

@@ -19,8 +19,9 @@ def volumetric_strain(batch: RVEBatch) -> np.ndarray:
 
 
 def coordination(batch: RVEBatch) -> np.ndarray:
-    """Mean number of contacts per particle 2 Nc / N, (R,)."""
-    return 2.0 * batch.ncontact / batch.n_particles
+    """Mean number of contacts per grain 2 Nc / N, (R,) (a clump is one grain, however
+    many of its members touch)."""
+    return 2.0 * batch.ncontact / batch.n_bodies
 
 
 def mean_rotation(batch: RVEBatch) -> np.ndarray:

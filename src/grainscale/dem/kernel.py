@@ -75,6 +75,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import get_num_threads, literally, njit, prange
 
+from grainscale.dem import rigid
 from grainscale.dem.neighbours import Status, build, image_table
 from grainscale.linalg3 import det3, inv3
 
@@ -125,6 +126,23 @@ class RveState(NamedTuple):
     wrapv: np.ndarray
 
 
+class Clumps(NamedTuple):
+    """The clump arrays of the RVEs (state.RVEBatch's body .. bj; empty for plain
+    spheres), sliced per RVE by `rve_clumps`; dem/rigid.py steps them."""
+
+    body: np.ndarray   # member -> body
+    rho: np.ndarray    # member offsets in the body frame
+    image: np.ndarray  # member image offsets
+    off: np.ndarray    # member lab offsets R rho (scratch)
+    bs: np.ndarray     # body centres (fractional)
+    bv: np.ndarray     # fluctuating velocities
+    bw: np.ndarray     # spins about the mean-field spin
+    bq: np.ndarray     # orientations
+    bl: np.ndarray     # lab angular momenta
+    bm: np.ndarray     # masses
+    bj: np.ndarray     # principal moments
+
+
 class ContactLaw(NamedTuple):
     """Constants of the contact law (seed Eq. 7-10), the damping and the Verlet skin; the
     same for every RVE of a batch (engine.ContactParams)."""
@@ -168,6 +186,13 @@ def rve_state(st, r):
 
 
 @njit(cache=True, inline="always")
+def rve_clumps(cl, r):
+    """The Clumps of RVE r of a batch's Clumps (views)."""
+    return Clumps(cl.body[r], cl.rho[r], cl.image[r], cl.off[r], cl.bs[r], cl.bv[r],
+                  cl.bw[r], cl.bq[r], cl.bl[r], cl.bm[r], cl.bj[r])
+
+
+@njit(cache=True, inline="always")
 def rve_controls(ctl, r):
     """The Controls of RVE r of a batch's Controls."""
     return Controls(ctl.dt, ctl.e_step[r], ctl.l_mean[r], ctl.hdot_fixed[r], ctl.l_ctrl[r],
@@ -205,12 +230,21 @@ def _positions(h, s, x, force, torque):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenise,
-                 commit=True, full_moduli=False):
-    """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
-    configuration; hw the history's components a slot (st.ft.shape[2]: 3, or 6 with rolling
-    resistance) and hertz (1: Hertz-Mindlin, law.hertz_kn > 0; 0: linear), given as
-    constants; table is (27,3) scratch for the image shifts.
+def contact_pass(dt, law, st, cl, hw, hertz, clumped, table, stress_out, stiff_out,
+                 homogenise, commit=True, full_moduli=False):
+    """Contact forces and torques of one RVE (RveState st, ContactLaw law, Clumps cl) at
+    its current configuration; hw the history's components a slot (st.ft.shape[2]: 3, or
+    6 with rolling resistance), hertz (1: Hertz-Mindlin, law.hertz_kn > 0; 0: linear) and
+    clumped (1: the spheres are clump members; 0: plain spheres) given as constants; table
+    is (27,3) scratch for the image shifts.
+
+    For clumps the stress and moduli take the branch vector between the bodies' centres
+    of mass, b = d - r_j + r_i (r the members' lab offsets, cl.off), and the kinetic
+    stress the bodies' motion: the Love-Weber sum follows from each body's equilibrium,
+    sum over its contacts of (x_c - X) (x) f = 0 in moments, with X any point fixed to the
+    body; a member centre is not one (the forces between members of a clump, which hold
+    it together, are not in the sum), the centre of mass is, and it is the point whose
+    momentum the kinetic stress carries (docs/dem.md).
 
     Normal force f_n = kn delta - c_n v_n (linear spring-dashpot; v_n > 0 separating),
     c_n = 2 gamma sqrt(m* kn), m* = mi mj/(mi + mj), gamma the damping ratio of the
@@ -239,6 +273,7 @@ def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenis
     alpha_r, eta_r, hz = law.rolling_stiffness, law.rolling_friction, law.hertz_kn
     literally(hw)  # a compile-time constant: a width read at run time cost 10 % a step
     literally(hertz)  # as a run-time test, the linear law's branch cost it 1 % a step
+    literally(clumped)
     rolling = hw == 6  # without it the moment's code is not compiled in
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
     nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
@@ -268,6 +303,7 @@ def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenis
     tf = torque.reshape(3 * n)
     kcap = ft.shape[1]
     ftf = ft.reshape(hw * n * kcap)
+    offf = cl.off.reshape(3 * cl.off.shape[0])  # empty unless clumped
     kt_mod = kt_ratio if full_moduli else 0.0  # kt/kn in the moduli
     geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
     tab = table.reshape(81)
@@ -425,6 +461,31 @@ def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenis
             fsum += abs(fn)  # a dashpot pulls as contacts part: keep a magnitude
             if not homogenise:
                 continue
+            if clumped == 1:  # branch between the bodies' centres; moduli with it
+                e0 = d0 - offf[j3] + offf[i3]
+                e1 = d1 - offf[j3 + U1] + offf[i3 + U1]
+                e2 = d2 - offf[j3 + U2] + offf[i3 + U2]
+                sxx += e0 * F0
+                sxy += e0 * F1
+                sxz += e0 * F2
+                syx += e1 * F0
+                syy += e1 * F1
+                syz += e1 * F2
+                szx += e2 * F0
+                szy += e2 * F1
+                szz += e2 * F2
+                q0 = e0 * n0
+                q1 = e1 * n1
+                q2 = e2 * n2
+                kq = kt_mod * kn
+                fa = geo * (abs(fn) + math.sqrt(f0 * f0 + f1 * f1 + f2 * f2))
+                c00 += kn * q0 * q0 + kq * (e0 * e0 - q0 * q0) + abs(q0) * fa
+                c11 += kn * q1 * q1 + kq * (e1 * e1 - q1 * q1) + abs(q1) * fa
+                c22 += kn * q2 * q2 + kq * (e2 * e2 - q2 * q2) + abs(q2) * fa
+                c01 += (kn - kq) * q0 * q1
+                c02 += (kn - kq) * q0 * q2
+                c12 += (kn - kq) * q1 * q2
+                continue
             sxx += d0 * F0
             sxy += d0 * F1
             sxz += d0 * F2
@@ -456,11 +517,14 @@ def contact_pass(dt, law, st, hw, hertz, table, stress_out, stiff_out, homogenis
         return ncontact, fsum, omax
     # kinetic (Reynolds) stress of the fluctuating motion, -(1/V) sum m v' (x) v': the
     # momentum the grains carry across any plane, a pressure in dilute or fast flow
-    for i in range(n):
-        mi = mass[i]
-        u0 = v[i, 0]
-        u1 = v[i, 1]
-        u2 = v[i, 2]
+    # (clumps: their centres of mass')
+    kin_m = cl.bm if clumped == 1 else mass
+    kin_v = cl.bv if clumped == 1 else v
+    for i in range(kin_m.shape[0]):
+        mi = kin_m[i]
+        u0 = kin_v[i, 0]
+        u1 = kin_v[i, 1]
+        u2 = kin_v[i, 2]
         sxx -= mi * u0 * u0
         sxy -= mi * u0 * u1
         sxz -= mi * u0 * u2
@@ -587,27 +651,15 @@ def _residuals(force, v, w, mass, inertia):
     return fres, ekin
 
 
-@njit(cache=True)
-def advance_rve(nsteps, law, st, ctl, out):
-    """_advance_rve with the history's width and the contact law as constants (one
-    compiled kernel for each of the four variants a batch can need)."""
-    hw = 6 if st.ft.shape[2] == 6 else 3
-    if law.hertz_kn > 0.0:
-        if hw == 6:
-            return _advance_rve(nsteps, law, st, ctl, out, 6, 1)
-        return _advance_rve(nsteps, law, st, ctl, out, 3, 1)
-    if hw == 6:
-        return _advance_rve(nsteps, law, st, ctl, out, 6, 0)
-    return _advance_rve(nsteps, law, st, ctl, out, 3, 0)
-
-
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
-    """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
-    ctl.dt [s]; see the module docstring.
+def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
+    """Advance one RVE (RveState st, Clumps cl, ContactLaw law, Controls ctl) by `nsteps`
+    steps of ctl.dt [s]; see the module docstring.
 
-    `hw` is the history's width (literal 3 or 6) and `hertz` the law (literal 1:
-    Hertz-Mindlin, 0: linear; advance_rve). `out` (6,) receives:
+    `hw` is the history's width (literal 3 or 6), `hertz` the law (literal 1:
+    Hertz-Mindlin, 0: linear) and `clumped` (literal 1: the spheres are clump members,
+    stepped as rigid bodies by dem/rigid.py instead of 6; 0: plain spheres). `out` (6,)
+    receives:
     contacts, unbalanced-force ratio, kinetic energy [J], the row
     length a list build asked for, steps done, the largest overlap delta/R* (Hertz-Mindlin;
     0 for the linear law). Returns a status code (0 = ok). After the
@@ -635,6 +687,13 @@ def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
         inv_m[i] = dt / mass[i]
         inv_i[i] = dt / inertia[i]
     lc = np.empty((3, 3))
+    nb = cl.bm.shape[0]  # 0 unless clumped
+    bforce = np.empty((nb, 3))
+    btorque = np.empty((nb, 3))
+    rmat = np.empty((nb, 3, 3))
+    work = np.empty((4, 4))
+    if clumped == 1:
+        rigid.orient(cl.body, cl.rho, cl.bq, cl.off, rmat)
     rmax = 0.0
     for i in range(n):
         rmax = max(rmax, radius[i])
@@ -659,6 +718,9 @@ def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
                 status = code
                 break
             need_rebuild[0] = 0
+            if clumped == 1:
+                rigid.after_build(h, s, cl.body, cl.rho, cl.image, cl.off, cl.bs, cl.bq,
+                                  st.nbr_j, st.nbr_shift, st.nbr_count, st.ft, rmat)
         # 2. cell control: h_new, and L from the current cell's inverse
         for a in range(3):
             for b in range(3):
@@ -694,11 +756,11 @@ def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
         # caller's stress is evaluated after the loop, at the end of the increment (8)
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
         if sample:  # two specialisations: the hot one keeps no stress sums live
-            ncontact, fsum, _ = contact_pass(dt, law, st, hw, hertz, table, stress_servo,
-                                             stiffness, True)
+            ncontact, fsum, _ = contact_pass(dt, law, st, cl, hw, hertz, clumped, table,
+                                             stress_servo, stiffness, True)
         else:
-            ncontact, fsum, _ = contact_pass(dt, law, st, hw, hertz, table, stress_servo,
-                                             stiff_scratch, False)
+            ncontact, fsum, _ = contact_pass(dt, law, st, cl, hw, hertz, clumped, table,
+                                             stress_servo, stiff_scratch, False)
         step_count[0] += 1
         # 5. new cell, its inverse for the position update
         for a in range(3):
@@ -706,8 +768,12 @@ def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
                 h[a, b] = hnew[a, b]
         inv3(h, hinv)
         # 6. integration, in loops LLVM can vectorise over particles (few arrays each)
-        umax2 = _translate(v, s, s_ref, force, inv_m, L, hinv, dt, damping)
-        _rotate(w, rot, torque, inv_i, dt, damping)
+        if clumped == 1:
+            umax2 = rigid.advance(cl, s, v, w, rot, s_ref, force, torque, L, hinv, dt,
+                                  damping, bforce, btorque, rmat, work)
+        else:
+            umax2 = _translate(v, s, s_ref, force, inv_m, L, hinv, dt, damping)
+            _rotate(w, rot, torque, inv_i, dt, damping)
         # 7. is the list still complete? |h ds| <= |h|_2 |ds| and
         # |h|_2 <= sqrt(|h|_1 |h|_inf) bound the fluctuating displacement cheaply
         n1 = max(abs(h[0, 0]) + abs(h[1, 0]) + abs(h[2, 0]),
@@ -740,11 +806,21 @@ def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
             status = code
             if code == Status.OK:
                 need_rebuild[0] = 0
+                if clumped == 1:
+                    rigid.after_build(h, s, cl.body, cl.rho, cl.image, cl.off, cl.bs,
+                                      cl.bq, st.nbr_j, st.nbr_shift, st.nbr_count, st.ft,
+                                      rmat)
         if status == Status.OK:
             stiff_out = stiff_scratch if servo_on else stiffness
-            ncontact, fsum, omax = contact_pass(0.0, law, st, hw, hertz, table, stress,
-                                                stiff_out, True, False, not servo_on)
-            fres, ekin = _residuals(force, v, w, mass, inertia)
+            ncontact, fsum, omax = contact_pass(0.0, law, st, cl, hw, hertz, clumped,
+                                                table, stress, stiff_out, True, False,
+                                                not servo_on)
+            if clumped == 1:  # per body: a member's force is not a grain's
+                rigid.reduce(cl.body, cl.off, force, torque, bforce, btorque)
+                fres, ekin = rigid.residuals(cl, bforce, rmat)
+                fres *= n / nb
+            else:
+                fres, ekin = _residuals(force, v, w, mass, inertia)
             out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
             out[2] = ekin
             out[5] = omax
@@ -753,11 +829,12 @@ def _advance_rve(nsteps, law, st, ctl, out, hw, hertz):
     return status
 
 
-def advance_batch(nsteps, law, st, ctl, status, out):
+def advance_batch(nsteps, law, st, ctl, status, out, cl=None):
     """Advance every RVE r of a batch by nsteps[r] steps, in parallel over RVEs.
 
     st and ctl hold the batch's arrays (RVE index first); status (R,) receives each RVE's
-    status code and out (R,OUT_WIDTH) its outputs (see advance_rve).
+    status code and out (R,OUT_WIDTH) its outputs (see _advance_rve); cl the batch's
+    Clumps when its spheres are clump members (None: plain spheres).
 
     Load balance: the RVEs' costs (proportional to nsteps) can differ by orders of
     magnitude, and the costly ones sit together (quasi-static RVEs near an intruder are
@@ -771,11 +848,17 @@ def advance_batch(nsteps, law, st, ctl, status, out):
     """
     nthr = max(1, min(get_num_threads(), st.s.shape[0]))
     rolling = st.ft.shape[3] == 6
+    bounds = split_by_cost(nsteps, nthr)
+    if cl is not None and cl.bm.shape[1] > 0:
+        _advance_split_clumps(nsteps, law, st, cl, ctl, status, out, bounds,
+                              6 if rolling else 3, 1 if law.hertz_kn > 0.0 else 0)
+        return
+    cl = no_clumps(st.s.shape[0])
     if law.hertz_kn > 0.0:
         split = _advance_split_hertz_rolling if rolling else _advance_split_hertz
     else:
         split = _advance_split_rolling if rolling else _advance_split
-    split(nsteps, law, st, ctl, status, out, split_by_cost(nsteps, nthr))
+    split(nsteps, law, st, cl, ctl, status, out, bounds)
 
 
 @njit(cache=True)
@@ -803,36 +886,71 @@ def split_by_cost(nsteps, nthr):
 # compiling one never compiles another (each would add the kernels' cold compile): lane
 # t advances RVEs bounds[t] .. bounds[t + 1] - 1
 @njit(cache=True, parallel=True)
-def _advance_split(nsteps, law, st, ctl, status, out, bounds):
+def _advance_split(nsteps, law, st, cl, ctl, status, out, bounds):
     """The linear law without rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                     out[r], 3, 0)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
+                                     rve_controls(ctl, r), out[r], 3, 0, 0)
 
 
 @njit(cache=True, parallel=True)
-def _advance_split_rolling(nsteps, law, st, ctl, status, out, bounds):
+def _advance_split_rolling(nsteps, law, st, cl, ctl, status, out, bounds):
     """The linear law with rolling resistance (6 history components a slot)."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                     out[r], 6, 0)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
+                                     rve_controls(ctl, r), out[r], 6, 0, 0)
 
 
 @njit(cache=True, parallel=True)
-def _advance_split_hertz(nsteps, law, st, ctl, status, out, bounds):
+def _advance_split_hertz(nsteps, law, st, cl, ctl, status, out, bounds):
     """Hertz-Mindlin without rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                     out[r], 3, 1)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
+                                     rve_controls(ctl, r), out[r], 3, 1, 0)
 
 
 @njit(cache=True, parallel=True)
-def _advance_split_hertz_rolling(nsteps, law, st, ctl, status, out, bounds):
+def _advance_split_hertz_rolling(nsteps, law, st, cl, ctl, status, out, bounds):
     """Hertz-Mindlin with rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_controls(ctl, r),
-                                     out[r], 6, 1)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
+                                     rve_controls(ctl, r), out[r], 6, 1, 0)
+
+
+@njit(cache=True, parallel=True)
+def _advance_split_clumps(nsteps, law, st, cl, ctl, status, out, bounds, hw, hertz):
+    """Clumps, with either law and history width (constants: one compile per use)."""
+    literally(hw)
+    literally(hertz)
+    for t in prange(bounds.shape[0] - 1):
+        for r in range(bounds[t], bounds[t + 1]):
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
+                                     rve_controls(ctl, r), out[r], hw, hertz, 1)
+
+
+@njit(cache=True)
+def no_clumps(n_rve):
+    """The Clumps of a batch of n_rve plain-sphere RVEs: every array empty (0 members,
+    0 bodies)."""
+    z3 = np.zeros((n_rve, 0, 3))
+    return Clumps(np.zeros((n_rve, 0), np.int32), z3, z3, z3, z3, z3, z3,
+                  np.zeros((n_rve, 0, 4)), z3, np.zeros((n_rve, 0)), z3)
+
+
+@njit(cache=True)
+def advance_rve(nsteps, law, st, ctl, out):
+    """_advance_rve of a plain-sphere RVE with the history's width and the contact law as
+    constants (for callers that schedule RVEs themselves: benchmarks/)."""
+    cl = rve_clumps(no_clumps(1), 0)
+    hw = 6 if st.ft.shape[2] == 6 else 3
+    if law.hertz_kn > 0.0:
+        if hw == 6:
+            return _advance_rve(nsteps, law, st, cl, ctl, out, 6, 1, 0)
+        return _advance_rve(nsteps, law, st, cl, ctl, out, 3, 1, 0)
+    if hw == 6:
+        return _advance_rve(nsteps, law, st, cl, ctl, out, 6, 0, 0)
+    return _advance_rve(nsteps, law, st, cl, ctl, out, 3, 0, 0)

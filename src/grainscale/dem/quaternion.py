@@ -80,21 +80,30 @@ def angular_velocity(q, L, J, rot, out):
             out[2] += rot[2, a] * body
 
 
-@njit(cache=True)
-def advance(q, L, J, T, dt, omega):
+@njit(cache=True, inline="always")
+def step(q, L, J, T0, T1, T2, dt, omega, rot, ln, half, new, W0=0.0, W1=0.0, W2=0.0):
     """One rotational leapfrog step (module docstring) in place: q (4,) from t_n to
-    t_(n+1), L (3,) from t_(n-1/2) to t_(n+1/2) under the torque T (3,) [N m]; omega
-    (3,) receives omega_(n+1/2) [rad/s]."""
-    rot = np.empty((3, 3))
-    Ln = np.empty(3)
-    for a in range(3):
-        Ln[a] = L[a] + 0.5 * dt * T[a]
-        L[a] += dt * T[a]
-    angular_velocity(q, Ln, J, rot, omega)
-    half = np.empty(4)
-    turned(q, 0.5 * dt * omega[0], 0.5 * dt * omega[1], 0.5 * dt * omega[2], half)
+    t_(n+1), L (3,) from t_(n-1/2) to t_(n+1/2) under the torque T [N m]; omega (3,)
+    receives omega_(n+1/2) [rad/s]. rot (3,3), ln (3,), half (4,), new (4,) scratch.
+    W (rad/s, default 0): a spin the orientation turns with besides omega (the mean
+    field's, when L is the angular momentum of the spin about it: dem/rigid.py)."""
+    ln[0] = L[0] + 0.5 * dt * T0
+    ln[1] = L[1] + 0.5 * dt * T1
+    ln[2] = L[2] + 0.5 * dt * T2
+    L[0] += dt * T0
+    L[1] += dt * T1
+    L[2] += dt * T2
+    angular_velocity(q, ln, J, rot, omega)
+    turned(q, 0.5 * dt * (omega[0] + W0), 0.5 * dt * (omega[1] + W1),
+           0.5 * dt * (omega[2] + W2), half)
     angular_velocity(half, L, J, rot, omega)
-    new = np.empty(4)
-    turned(q, dt * omega[0], dt * omega[1], dt * omega[2], new)
+    turned(q, dt * (omega[0] + W0), dt * (omega[1] + W1), dt * (omega[2] + W2), new)
     for a in range(4):
         q[a] = new[a]
+
+
+@njit(cache=True)
+def advance(q, L, J, T, dt, omega):
+    """`step` with its scratch allocated and the torque as an array T (3,)."""
+    step(q, L, J, T[0], T[1], T[2], dt, omega, np.empty((3, 3)), np.empty(3),
+         np.empty(4), np.empty(4))

@@ -11,6 +11,14 @@ shift encoded as one byte (27 values, 13 = no shift) and its contact history `ft
 tangential force on i [N] and, with rolling resistance, the rolling moment on j [N m]
 (HISTORY_ROLLING components; without it the moments take no memory). Capacity is regrown
 outside compiled code on overflow.
+
+Clumps (rigid grains of overlapping spheres, dem/clump.py): the spheres are the clumps'
+members, and the arrays prefixed `b` hold B bodies per RVE (B = 0: a packing of plain
+spheres, every clump array empty). A member's s, v and w are then set from its body every
+step (dem/rigid.py): its fluctuating velocity is that of its body's material point,
+v'_i = V' + omega' x r_i - D r_i (r_i = R rho_i its lab offset), and its spin the body's
+omega' = omega - W. Members keep their body's mass, the mass that meets a collision
+(the normal dashpot's m*).
 """
 
 from __future__ import annotations
@@ -69,6 +77,36 @@ class RVEBatch:
     ncontact: np.ndarray     # (R,) int32 contacts at the last step
     unbalanced: np.ndarray   # (R,) unbalanced-force ratio at the last step
     kinetic: np.ndarray      # (R,) fluctuating kinetic energy at the last step [J]
+    # clumps (module docstring; B = 0 and every array empty for plain spheres)
+    body: np.ndarray         # (R,N) int32 the body of each member sphere
+    rho: np.ndarray          # (R,N,3) member centre in its body's principal frame [m]
+    image: np.ndarray        # (R,N,3) s_i - (S_b + h^-1 R rho_i), integers fixed at a build
+    off: np.ndarray          # (R,N,3) scratch: R rho_i, the member's lab offset [m]
+    bs: np.ndarray           # (R,B,3) body centre of mass, fractional
+    bv: np.ndarray           # (R,B,3) its fluctuating velocity V' [m/s]
+    bw: np.ndarray           # (R,B,3) its angular velocity about the mean-field spin [rad/s]
+    bq: np.ndarray           # (R,B,4) orientation, unit quaternion body -> lab
+    bl: np.ndarray           # (R,B,3) angular momentum of the spin bw, I bw [kg m^2/s]
+    bm: np.ndarray           # (R,B) mass [kg]
+    bj: np.ndarray           # (R,B,3) principal moments of inertia [kg m^2]
+    bvol: np.ndarray         # (R,B) solid volume of the union of its spheres [m^3]
+
+    @property
+    def clumped(self) -> bool:
+        """True if the spheres are members of clumps (bodies)."""
+        return self.bm.shape[1] > 0
+
+    @property
+    def n_bodies(self) -> int:
+        """Bodies per RVE: clumps, or the spheres themselves."""
+        return self.bm.shape[1] if self.clumped else self.s.shape[1]
+
+    def solid_volume(self) -> np.ndarray:
+        """Solid volume of each RVE's grains, (R,) [m^3] (a clump's members overlap: the
+        volume of their union)."""
+        if self.clumped:
+            return self.bvol.sum(axis=1)
+        return (4.0 / 3.0) * np.pi * np.sum(self.radius**3, axis=1)
 
     @property
     def n_rve(self) -> int:
@@ -88,8 +126,7 @@ class RVEBatch:
 
     def porosity(self) -> np.ndarray:
         """1 - solid volume / cell volume, (R,)."""
-        solid = (4.0 / 3.0) * np.pi * np.sum(self.radius**3, axis=1)
-        return 1.0 - solid / self.volume()
+        return 1.0 - self.solid_volume() / self.volume()
 
     def copy(self) -> RVEBatch:
         return RVEBatch(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
@@ -101,9 +138,14 @@ class RVEBatch:
 
 
 def allocate(n_rve: int, n_particles: int, capacity: int = 16,
-             history: int = HISTORY) -> RVEBatch:
-    """Zeroed arrays for a batch; identity cells; `history` components per contact."""
+             history: int = HISTORY, n_bodies: int = 0) -> RVEBatch:
+    """Zeroed arrays for a batch; identity cells; `history` components per contact;
+    n_bodies clumps per RVE (0: plain spheres)."""
     r, n, k = n_rve, n_particles, capacity
+    m = n if n_bodies > 0 else 0  # members have clump arrays only in a clumped batch
+    nb = n_bodies
+    q0 = np.zeros((r, nb, 4))
+    q0[..., 0] = 1.0
     eye = np.broadcast_to(np.eye(3), (r, 3, 3)).copy()
     return RVEBatch(
         h=eye.copy(), s=np.zeros((r, n, 3)), v=np.zeros((r, n, 3)), w=np.zeros((r, n, 3)),
@@ -117,6 +159,10 @@ def allocate(n_rve: int, n_particles: int, capacity: int = 16,
         force=np.zeros((r, n, 3)), torque=np.zeros((r, n, 3)), x=np.zeros((r, n, 3)),
         link=np.zeros((r, 2 * n + 1), np.int32), wrapv=np.zeros((r, n, 3), np.int32),
         ncontact=np.zeros(r, np.int32), unbalanced=np.zeros(r), kinetic=np.zeros(r),
+        body=np.zeros((r, m), np.int32), rho=np.zeros((r, m, 3)), image=np.zeros((r, m, 3)),
+        off=np.zeros((r, m, 3)), bs=np.zeros((r, nb, 3)), bv=np.zeros((r, nb, 3)),
+        bw=np.zeros((r, nb, 3)), bq=q0, bl=np.zeros((r, nb, 3)), bm=np.zeros((r, nb)),
+        bj=np.zeros((r, nb, 3)), bvol=np.zeros((r, nb)),
     )
 
 
@@ -138,6 +184,114 @@ def from_packing(h: np.ndarray, positions: np.ndarray, radii: np.ndarray, densit
         b.mass[r] = m
         b.inertia[r] = 0.4 * m * radii**2
     return b
+
+
+def from_clumps(h: np.ndarray, centres: np.ndarray, quats: np.ndarray, grains: list,
+                density: float, n_copies: int = 1, capacity: int = 16,
+                history: int = HISTORY) -> RVEBatch:
+    """A batch of `n_copies` identical RVEs of B clumps at rest: centres of mass (B,3) [m],
+    orientations (B,4) (unit quaternions body -> lab) and one scaled clump.Template per
+    body (`grains`, B of them; they may repeat). Members are numbered body by body and
+    placed at x = X_b + R(q_b) rho_k; their contact lists are built by the kernel."""
+    from grainscale.dem.quaternion import matrix  # noqa: PLC0415 (numba import cost)
+
+    centres = np.asarray(centres, float).reshape(-1, 3)
+    quats = np.asarray(quats, float).reshape(-1, 4)
+    nb = len(grains)
+    if centres.shape[0] != nb or quats.shape[0] != nb:
+        raise ValueError(f"{nb} grains for {centres.shape[0]} centres and "
+                         f"{quats.shape[0]} orientations")
+    n = sum(len(g.radii) for g in grains)
+    b = allocate(n_copies, n, capacity, history, n_bodies=nb)
+    hinv = np.linalg.inv(h)
+    rot = np.empty((3, 3))
+    body = np.empty(n, np.int32)
+    rho = np.empty((n, 3))
+    radius = np.empty(n)
+    off = np.empty((n, 3))
+    at = 0
+    for k, g in enumerate(grains):
+        q = quats[k] / np.linalg.norm(quats[k])
+        quats[k] = q
+        matrix(q, rot)
+        m = len(g.radii)
+        body[at:at + m] = k
+        rho[at:at + m] = g.offsets
+        radius[at:at + m] = g.radii
+        off[at:at + m] = g.offsets @ rot.T
+        at += m
+    sb = centres @ hinv.T
+    sb -= np.floor(sb)
+    s = sb[body] + off @ hinv.T
+    bm = density * np.array([g.volume for g in grains])
+    bj = density * np.array([g.inertia for g in grains])
+    for r in range(n_copies):
+        b.h[r] = h
+        b.h0[r] = h
+        b.h_ref[r] = h
+        b.s[r] = s
+        b.radius[r] = radius
+        b.mass[r] = bm[body]
+        b.inertia[r] = bj.min(axis=1)[body]
+        b.body[r] = body
+        b.rho[r] = rho
+        b.off[r] = off
+        b.bs[r] = sb
+        b.bq[r] = quats
+        b.bm[r] = bm
+        b.bj[r] = bj
+        b.bvol[r] = [g.volume for g in grains]
+    return b
+
+
+def from_members(h: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                 bodies: np.ndarray, density: float, n_copies: int = 1, capacity: int = 16,
+                 history: int = HISTORY) -> RVEBatch:
+    """A clumped batch from member spheres (centres [m], radii [m]) and the clump of each
+    (bodies, ids 0..B-1, as io/packing.read_members gives them): each clump's members
+    taken to one periodic image (nearest to its first member's), its mass properties
+    those of their union (clump.from_members)."""
+    from grainscale.dem import clump  # noqa: PLC0415 (numba import cost)
+
+    centres = np.asarray(centres, float)
+    bodies = np.asarray(bodies, np.int64)
+    ids = np.unique(bodies)
+    if not np.array_equal(ids, np.arange(ids.size)):
+        raise ValueError(f"clump ids must be 0..B-1 without gaps; got {ids.size} ids up to "
+                         f"{int(ids.max())}")
+    hinv = np.linalg.inv(h)
+    grains, com, quats = [], np.empty((ids.size, 3)), np.empty((ids.size, 4))
+    for k in ids:
+        x = centres[bodies == k]
+        f = (x - x[0]) @ hinv.T
+        x = x[0] + (f - np.round(f)) @ h.T  # one image
+        grains.append(None)
+        grains[k], com[k], quats[k] = clump.from_members(x, radii[bodies == k])
+    b = from_clumps(h, com, quats, grains, density, n_copies, capacity, history)
+    return b
+
+
+def member_positions(b: RVEBatch, r: int = 0) -> np.ndarray:
+    """(N,3) member centres [m] of RVE r of a clumped batch, each clump's centre wrapped
+    into the cell and its members about it (the exchange format's layout)."""
+    from grainscale.dem.quaternion import matrix  # noqa: PLC0415
+
+    h = b.h[r]
+    centre = (b.bs[r] - np.floor(b.bs[r])) @ h.T
+    rot = np.empty((b.n_bodies, 3, 3))
+    for k in range(b.n_bodies):
+        matrix(b.bq[r, k], rot[k])
+    return centre[b.body[r]] + np.einsum("nab,nb->na", rot[b.body[r]], b.rho[r])
+
+
+def body_lever(b: RVEBatch) -> np.ndarray:
+    """(R,B) the largest distance from a body's centre of mass to its surface,
+    max_k |rho_k| + r_k [m] (the lever a contact force turns a clump with)."""
+    lever = np.zeros(b.bm.shape)
+    reach = np.linalg.norm(b.rho, axis=2) + b.radius
+    for r in range(b.n_rve):
+        np.maximum.at(lever[r], b.body[r], reach[r])
+    return lever
 
 
 def concatenate(batches: list[RVEBatch]) -> RVEBatch:
@@ -238,9 +392,15 @@ def with_history(b: RVEBatch, history: int) -> RVEBatch:
     return b
 
 
+# the clump arrays that define a clumped batch's state (`off` is scratch)
+CLUMP_FIELDS = ("body", "rho", "image", "bs", "bv", "bw", "bq", "bl", "bm", "bj", "bvol")
+
+
 def state_arrays(b: RVEBatch) -> dict[str, np.ndarray]:
-    """The arrays that define the physical state (for HDF5 and checkpoints)."""
-    return {name: getattr(b, name) for name in STATE_FIELDS}
+    """The arrays that define the physical state (for HDF5 and checkpoints): those of
+    STATE_FIELDS, and CLUMP_FIELDS for a clumped batch."""
+    names = STATE_FIELDS + (CLUMP_FIELDS if b.clumped else ())
+    return {name: getattr(b, name) for name in names}
 
 
 # state fields with a per-sphere axis (axis 1) and with a neighbour-slot axis (axis 2)
@@ -259,8 +419,9 @@ def longest_row(batches: list[RVEBatch]) -> int:
 def rve_constants(b: RVEBatch) -> dict[str, np.ndarray]:
     """Per-RVE constants of a batch, (R,) each: mean grain radius [m], grain mass [kg]
     and solid volume [m^3] (what per-RVE quantities need from the spheres)."""
-    return {"mean_radius": b.radius.mean(axis=1), "grain_mass": b.mass.sum(axis=1),
-            "solid_volume": (4.0 / 3.0) * np.pi * np.sum(b.radius**3, axis=1)}
+    grain_mass = b.bm.sum(axis=1) if b.clumped else b.mass.sum(axis=1)
+    return {"mean_radius": b.radius.mean(axis=1), "grain_mass": grain_mass,
+            "solid_volume": b.solid_volume()}
 
 
 def with_capacity(b: RVEBatch, capacity: int) -> RVEBatch:
@@ -309,9 +470,11 @@ def unpadded(arrays: dict[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
 
 
 def from_state_arrays(arrays: dict[str, np.ndarray]) -> RVEBatch:
-    """Rebuild a batch from `state_arrays` output; scratch is re-allocated."""
+    """Rebuild a batch from `state_arrays` output; scratch is re-allocated (a clumped
+    batch's member offsets by the kernel's next call)."""
     r, n, k = arrays["nbr_j"].shape
-    b = allocate(r, n, k)
-    for name in STATE_FIELDS:
+    n_bodies = arrays["bm"].shape[1] if "bm" in arrays else 0
+    b = allocate(r, n, k, n_bodies=n_bodies)
+    for name in STATE_FIELDS + (CLUMP_FIELDS if n_bodies else ()):
         setattr(b, name, np.array(arrays[name], dtype=getattr(b, name).dtype))
     return b
