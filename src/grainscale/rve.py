@@ -23,7 +23,7 @@ from grainscale.config.rve import RVECase, check_particles
 from grainscale.dem import element_tests, engine
 from grainscale.dem.generate import contact_params
 from grainscale.dem.generate import generate as _generate
-from grainscale.dem.state import RVEBatch, concatenate
+from grainscale.dem.state import RVEBatch, concatenate, member_positions
 from grainscale.io.packing import load_packing, write_packing
 from grainscale.io.progress import Progress
 from grainscale.io.rve_h5 import write_rve_state
@@ -214,6 +214,9 @@ def save(params: RVECase | Case | str | Path, batch: RVEBatch, path: str | Path)
     path = Path(path)
     if path.suffix == ".h5":
         write_rve_state(path, batch.take([0]), case.rve.recipe())
+    elif path.suffix == ".txt" and batch.clumped:
+        write_packing(path, batch.h[0], member_positions(batch), batch.radius[0],
+                      bodies=batch.body[0])
     elif path.suffix == ".txt":
         write_packing(path, batch.h[0], batch.s[0] @ batch.h[0].T, batch.radius[0])
     else:

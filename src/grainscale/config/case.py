@@ -709,6 +709,12 @@ def check_case(case: Case) -> None:
         if m.type == "dem" and case.rve is None:
             raise ConfigError(f"materials.{name}.type = 'dem' needs an [rve] table for the "
                               "contact parameters of its packings")
+        if m.type == "dem" and case.rve.clump is not None:
+            raise ConfigError(f"materials.{name}.type = 'dem' with [rve.clump] (template = "
+                              f"{case.rve.clump.template!r}): clumped RVEs run in element "
+                              "tests (grainscale rve ...) but not yet in the multiscale "
+                              "solver (checkpoints, MPI and CUDA do not carry them); valid: "
+                              "no [rve.clump] for a multiscale run")
         if m.type == "dem" and m.density is not None:
             raise ConfigError(f"materials.{name}.density = {m.density}: a 'dem' material's "
                               "density is that of its packings; remove the key")

@@ -1,9 +1,10 @@
 """Full RVE state (cell, spheres, contact history) to and from HDF5.
 
-Layout: one group `rve` holding every array of `dem.state.STATE_FIELDS` with the RVE
-index first, plus attributes (format version, package version, and any parameters the
-caller passes, e.g. the [rve] table as JSON). Written atomically: a temporary file is
-renamed over the target only once complete, so an existing file stays valid.
+Layout: one group `rve` holding every array of `dem.state.STATE_FIELDS` (and, for
+clumps, CLUMP_FIELDS) with the RVE index first, plus attributes (format version, package
+version, and any parameters the caller passes, e.g. the [rve] table as JSON). Written
+atomically: a temporary file is renamed over the target only once complete, so an
+existing file stays valid.
 """
 
 from __future__ import annotations
@@ -16,7 +17,13 @@ import numpy as np
 
 from grainscale import __version__
 from grainscale.config.base import ConfigError
-from grainscale.dem.state import STATE_FIELDS, RVEBatch, from_state_arrays, state_arrays
+from grainscale.dem.state import (
+    CLUMP_FIELDS,
+    STATE_FIELDS,
+    RVEBatch,
+    from_state_arrays,
+    state_arrays,
+)
 from grainscale.io.checkpoint import write_h5_atomic
 
 FORMAT = "grainscale-rve-state v1"
@@ -33,7 +40,8 @@ def read_group(group: h5py.Group) -> RVEBatch:
     missing = [n for n in STATE_FIELDS if n not in group]
     if missing:
         raise ConfigError(f"RVE state is missing arrays {missing}")
-    return from_state_arrays({name: group[name][()] for name in STATE_FIELDS})
+    names = STATE_FIELDS + (CLUMP_FIELDS if "bm" in group else ())
+    return from_state_arrays({name: group[name][()] for name in names})
 
 
 def write_rve_state(path: str | Path, batch: RVEBatch, params: dict | None = None) -> None:

@@ -2,7 +2,9 @@
 
 `<stem>_spheres.vtu`: one vertex per sphere (Cartesian centre, wrapped into the cell)
 with point data radius, mass, velocity (fluctuating), angular_velocity, rotation
-(accumulated angle). In ParaView: Glyph filter, glyph type Sphere, scale array
+(accumulated angle), and for clumps `clump`, the grain each sphere is a member of (its
+mass and velocity are then the member's: the clump's mass, the velocity of its material
+point). In ParaView: Glyph filter, glyph type Sphere, scale array
 `radius`, scale factor 2 (the glyph source has radius 0.5).
 `<stem>_contacts.vtu`: one line per contact from centre i to the image of centre j that
 touches it (lines cross the cell boundary where contacts do), so a line's end minus its
@@ -94,10 +96,12 @@ def write_rve_vtk(stem: str | Path, batch: RVEBatch, cp: ContactParams,
     s = batch.s[r] - np.floor(batch.s[r])
     x = s @ h.T
     n = len(x)
-    spheres = meshio.Mesh(
-        x, [("vertex", np.arange(n).reshape(-1, 1))],
-        point_data={"radius": batch.radius[r], "mass": batch.mass[r], "velocity": batch.v[r],
-                    "angular_velocity": batch.w[r], "rotation": batch.rot[r]})
+    point_data = {"radius": batch.radius[r], "mass": batch.mass[r], "velocity": batch.v[r],
+                  "angular_velocity": batch.w[r], "rotation": batch.rot[r]}
+    if batch.clumped:  # colour by it to see the grains
+        point_data["clump"] = batch.body[r].astype(np.int32)
+    spheres = meshio.Mesh(x, [("vertex", np.arange(n).reshape(-1, 1))],
+                          point_data=point_data)
     i, j, d, fn, ft = contact_list(batch, cp, r)
     start = x[i]
     pts = np.concatenate([start, start + d]) if len(i) else np.zeros((0, 3))
