@@ -39,6 +39,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams, ShearTest
 from grainscale.dem import element_tests
 from grainscale.dem.retile import multiply_cell
@@ -87,6 +88,9 @@ def tile(batch: RVEBatch, n: int, seed: int = 0) -> RVEBatch:
     big = batch.take([0])
     if n == 1:
         return big
+    if big.clumped:
+        raise ConfigError(f"tiles = {n}: supercells of clumps ([rve.clump]) are not made "
+                          "yet; valid: tiles = 1 with clumps")
     for k in range(3):
         big = multiply_cell(big, 0, k, n)
     rng = np.random.default_rng(seed)

@@ -46,6 +46,9 @@ def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
     moment on j are each the opposite of the other grain's). The rebuild before the next
     step matches these entries by partner and image, so every contact keeps its history.
     """
+    if b.clumped:
+        raise ValueError("a clumped RVE cannot be taken several times yet (retiling, "
+                         "supercells); valid: an RVE of spheres")
     n = b.n_particles
     out = allocate(1, m * n, b.capacity, b.ft.shape[3])  # grown below if a row gets longer
     scale = np.ones(3)
