@@ -1,4 +1,4 @@
-"""Clumps in the DEM kernel (dem/rigid.py, kernel.contact_pass with clumped = 1): the
+"""Clumps in the DEM kernel (dem/rigid.py, kernel.contact_pass with Clumps): the
 rigid-body step against conservation laws and the spheres' own path, the stress against
 an independent Love-Weber sum, the list without a clump's inner pairs.
 

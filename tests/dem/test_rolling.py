@@ -47,8 +47,7 @@ def pair(direction, r1=1.0e-3, r2=1.6e-3, overlap=2e-6):
 def _committed_pass(dt, law, st, table, stress, stiff):
     # the history width as the constant contact_pass takes (called from Python, each
     # call would re-dispatch on the literal)
-    cl = kernel.rve_clumps(kernel.no_clumps(1), 0)
-    return kernel.contact_pass(dt, law, st, cl, 6, 0, 0, table, stress, stiff, False, True)
+    return kernel.contact_pass(dt, law, st, None, 6, 0, table, stress, stiff, False, True)
 
 
 def contact_step(b, p, dt):

@@ -230,12 +230,13 @@ def _positions(h, s, x, force, torque):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def contact_pass(dt, law, st, cl, hw, hertz, clumped, table, stress_out, stiff_out,
-                 homogenise, commit=True, full_moduli=False):
-    """Contact forces and torques of one RVE (RveState st, ContactLaw law, Clumps cl) at
-    its current configuration; hw the history's components a slot (st.ft.shape[2]: 3, or
-    6 with rolling resistance), hertz (1: Hertz-Mindlin, law.hertz_kn > 0; 0: linear) and
-    clumped (1: the spheres are clump members; 0: plain spheres) given as constants; table
+def contact_pass(dt, law, st, cl, hw, hertz, table, stress_out, stiff_out, homogenise,
+                 commit=True, full_moduli=False):
+    """Contact forces and torques of one RVE (RveState st, ContactLaw law) at its current
+    configuration; cl its Clumps when the spheres are clump members, None for plain
+    spheres (a None is a type: the clump code is not compiled into the spheres' variant);
+    hw the history's components a slot (st.ft.shape[2]: 3, or 6 with rolling resistance)
+    and hertz (1: Hertz-Mindlin, law.hertz_kn > 0; 0: linear) given as constants; table
     is (27,3) scratch for the image shifts.
 
     For clumps the stress and moduli take the branch vector between the bodies' centres
@@ -273,7 +274,6 @@ def contact_pass(dt, law, st, cl, hw, hertz, clumped, table, stress_out, stiff_o
     alpha_r, eta_r, hz = law.rolling_stiffness, law.rolling_friction, law.hertz_kn
     literally(hw)  # a compile-time constant: a width read at run time cost 10 % a step
     literally(hertz)  # as a run-time test, the linear law's branch cost it 1 % a step
-    literally(clumped)
     rolling = hw == 6  # without it the moment's code is not compiled in
     h, s, v, w, radius, mass, L = st.h, st.s, st.v, st.w, st.radius, st.mass, st.L
     nbr_j, nbr_shift, nbr_count, ft = st.nbr_j, st.nbr_shift, st.nbr_count, st.ft
@@ -303,7 +303,8 @@ def contact_pass(dt, law, st, cl, hw, hertz, clumped, table, stress_out, stiff_o
     tf = torque.reshape(3 * n)
     kcap = ft.shape[1]
     ftf = ft.reshape(hw * n * kcap)
-    offf = cl.off.reshape(3 * cl.off.shape[0])  # empty unless clumped
+    if cl is not None:
+        offf = cl.off.reshape(3 * n)
     kt_mod = kt_ratio if full_moduli else 0.0  # kt/kn in the moduli
     geo = 1.0 if full_moduli else 0.0  # the turning of the contact forces
     tab = table.reshape(81)
@@ -461,7 +462,7 @@ def contact_pass(dt, law, st, cl, hw, hertz, clumped, table, stress_out, stiff_o
             fsum += abs(fn)  # a dashpot pulls as contacts part: keep a magnitude
             if not homogenise:
                 continue
-            if clumped == 1:  # branch between the bodies' centres; moduli with it
+            if cl is not None:  # branch between the bodies' centres; moduli with it
                 e0 = d0 - offf[j3] + offf[i3]
                 e1 = d1 - offf[j3 + U1] + offf[i3 + U1]
                 e2 = d2 - offf[j3 + U2] + offf[i3 + U2]
@@ -518,8 +519,12 @@ def contact_pass(dt, law, st, cl, hw, hertz, clumped, table, stress_out, stiff_o
     # kinetic (Reynolds) stress of the fluctuating motion, -(1/V) sum m v' (x) v': the
     # momentum the grains carry across any plane, a pressure in dilute or fast flow
     # (clumps: their centres of mass')
-    kin_m = cl.bm if clumped == 1 else mass
-    kin_v = cl.bv if clumped == 1 else v
+    if cl is not None:
+        kin_m = cl.bm
+        kin_v = cl.bv
+    else:
+        kin_m = mass
+        kin_v = v
     for i in range(kin_m.shape[0]):
         mi = kin_m[i]
         u0 = kin_v[i, 0]
@@ -652,14 +657,14 @@ def _residuals(force, v, w, mass, inertia):
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
-    """Advance one RVE (RveState st, Clumps cl, ContactLaw law, Controls ctl) by `nsteps`
-    steps of ctl.dt [s]; see the module docstring.
+def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz):
+    """Advance one RVE (RveState st, ContactLaw law, Controls ctl) by `nsteps` steps of
+    ctl.dt [s]; see the module docstring.
 
-    `hw` is the history's width (literal 3 or 6), `hertz` the law (literal 1:
-    Hertz-Mindlin, 0: linear) and `clumped` (literal 1: the spheres are clump members,
-    stepped as rigid bodies by dem/rigid.py instead of 6; 0: plain spheres). `out` (6,)
-    receives:
+    `cl` is the RVE's Clumps when its spheres are clump members, stepped as rigid bodies
+    by dem/rigid.py instead of 6, or None for plain spheres (whose variant then holds no
+    clump code); `hw` is the history's width (literal 3 or 6) and `hertz` the law
+    (literal 1: Hertz-Mindlin, 0: linear). `out` (6,) receives:
     contacts, unbalanced-force ratio, kinetic energy [J], the row
     length a list build asked for, steps done, the largest overlap delta/R* (Hertz-Mindlin;
     0 for the linear law). Returns a status code (0 = ok). After the
@@ -687,12 +692,12 @@ def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
         inv_m[i] = dt / mass[i]
         inv_i[i] = dt / inertia[i]
     lc = np.empty((3, 3))
-    nb = cl.bm.shape[0]  # 0 unless clumped
-    bforce = np.empty((nb, 3))
-    btorque = np.empty((nb, 3))
-    rmat = np.empty((nb, 3, 3))
-    work = np.empty((4, 4))
-    if clumped == 1:
+    if cl is not None:
+        nb = cl.bm.shape[0]
+        bforce = np.empty((nb, 3))
+        btorque = np.empty((nb, 3))
+        rmat = np.empty((nb, 3, 3))
+        work = np.empty((4, 4))
         rigid.orient(cl.body, cl.rho, cl.bq, cl.off, rmat)
     rmax = 0.0
     for i in range(n):
@@ -718,7 +723,7 @@ def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
                 status = code
                 break
             need_rebuild[0] = 0
-            if clumped == 1:
+            if cl is not None:
                 rigid.after_build(h, s, cl.body, cl.rho, cl.image, cl.off, cl.bs, cl.bq,
                                   st.nbr_j, st.nbr_shift, st.nbr_count, st.ft, rmat)
         # 2. cell control: h_new, and L from the current cell's inverse
@@ -756,11 +761,11 @@ def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
         # caller's stress is evaluated after the loop, at the end of the increment (8)
         sample = servo_on and step_count[0] % SERVO_EVERY == 0
         if sample:  # two specialisations: the hot one keeps no stress sums live
-            ncontact, fsum, _ = contact_pass(dt, law, st, cl, hw, hertz, clumped, table,
-                                             stress_servo, stiffness, True)
+            ncontact, fsum, _ = contact_pass(dt, law, st, cl, hw, hertz, table, stress_servo,
+                                             stiffness, True)
         else:
-            ncontact, fsum, _ = contact_pass(dt, law, st, cl, hw, hertz, clumped, table,
-                                             stress_servo, stiff_scratch, False)
+            ncontact, fsum, _ = contact_pass(dt, law, st, cl, hw, hertz, table, stress_servo,
+                                             stiff_scratch, False)
         step_count[0] += 1
         # 5. new cell, its inverse for the position update
         for a in range(3):
@@ -768,7 +773,7 @@ def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
                 h[a, b] = hnew[a, b]
         inv3(h, hinv)
         # 6. integration, in loops LLVM can vectorise over particles (few arrays each)
-        if clumped == 1:
+        if cl is not None:
             umax2 = rigid.advance(cl, s, v, w, rot, s_ref, force, torque, L, hinv, dt,
                                   damping, bforce, btorque, rmat, work)
         else:
@@ -806,16 +811,15 @@ def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz, clumped):
             status = code
             if code == Status.OK:
                 need_rebuild[0] = 0
-                if clumped == 1:
+                if cl is not None:
                     rigid.after_build(h, s, cl.body, cl.rho, cl.image, cl.off, cl.bs,
                                       cl.bq, st.nbr_j, st.nbr_shift, st.nbr_count, st.ft,
                                       rmat)
         if status == Status.OK:
             stiff_out = stiff_scratch if servo_on else stiffness
-            ncontact, fsum, omax = contact_pass(0.0, law, st, cl, hw, hertz, clumped,
-                                                table, stress, stiff_out, True, False,
-                                                not servo_on)
-            if clumped == 1:  # per body: a member's force is not a grain's
+            ncontact, fsum, omax = contact_pass(0.0, law, st, cl, hw, hertz, table, stress,
+                                                stiff_out, True, False, not servo_on)
+            if cl is not None:  # per body: a member's force is not a grain's
                 rigid.reduce(cl.body, cl.off, force, torque, bforce, btorque)
                 fres, ekin = rigid.residuals(cl, bforce, rmat)
                 fres *= n / nb
@@ -853,12 +857,11 @@ def advance_batch(nsteps, law, st, ctl, status, out, cl=None):
         _advance_split_clumps(nsteps, law, st, cl, ctl, status, out, bounds,
                               6 if rolling else 3, 1 if law.hertz_kn > 0.0 else 0)
         return
-    cl = no_clumps(st.s.shape[0])
     if law.hertz_kn > 0.0:
         split = _advance_split_hertz_rolling if rolling else _advance_split_hertz
     else:
         split = _advance_split_rolling if rolling else _advance_split
-    split(nsteps, law, st, cl, ctl, status, out, bounds)
+    split(nsteps, law, st, ctl, status, out, bounds)
 
 
 @njit(cache=True)
@@ -886,39 +889,39 @@ def split_by_cost(nsteps, nthr):
 # compiling one never compiles another (each would add the kernels' cold compile): lane
 # t advances RVEs bounds[t] .. bounds[t + 1] - 1
 @njit(cache=True, parallel=True)
-def _advance_split(nsteps, law, st, cl, ctl, status, out, bounds):
+def _advance_split(nsteps, law, st, ctl, status, out, bounds):
     """The linear law without rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
-                                     rve_controls(ctl, r), out[r], 3, 0, 0)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), None,
+                                     rve_controls(ctl, r), out[r], 3, 0)
 
 
 @njit(cache=True, parallel=True)
-def _advance_split_rolling(nsteps, law, st, cl, ctl, status, out, bounds):
+def _advance_split_rolling(nsteps, law, st, ctl, status, out, bounds):
     """The linear law with rolling resistance (6 history components a slot)."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
-                                     rve_controls(ctl, r), out[r], 6, 0, 0)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), None,
+                                     rve_controls(ctl, r), out[r], 6, 0)
 
 
 @njit(cache=True, parallel=True)
-def _advance_split_hertz(nsteps, law, st, cl, ctl, status, out, bounds):
+def _advance_split_hertz(nsteps, law, st, ctl, status, out, bounds):
     """Hertz-Mindlin without rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
-                                     rve_controls(ctl, r), out[r], 3, 1, 0)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), None,
+                                     rve_controls(ctl, r), out[r], 3, 1)
 
 
 @njit(cache=True, parallel=True)
-def _advance_split_hertz_rolling(nsteps, law, st, cl, ctl, status, out, bounds):
+def _advance_split_hertz_rolling(nsteps, law, st, ctl, status, out, bounds):
     """Hertz-Mindlin with rolling resistance."""
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
-            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
-                                     rve_controls(ctl, r), out[r], 6, 1, 0)
+            status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), None,
+                                     rve_controls(ctl, r), out[r], 6, 1)
 
 
 @njit(cache=True, parallel=True)
@@ -929,28 +932,18 @@ def _advance_split_clumps(nsteps, law, st, cl, ctl, status, out, bounds, hw, her
     for t in prange(bounds.shape[0] - 1):
         for r in range(bounds[t], bounds[t + 1]):
             status[r] = _advance_rve(nsteps[r], law, rve_state(st, r), rve_clumps(cl, r),
-                                     rve_controls(ctl, r), out[r], hw, hertz, 1)
-
-
-@njit(cache=True)
-def no_clumps(n_rve):
-    """The Clumps of a batch of n_rve plain-sphere RVEs: every array empty (0 members,
-    0 bodies)."""
-    z3 = np.zeros((n_rve, 0, 3))
-    return Clumps(np.zeros((n_rve, 0), np.int32), z3, z3, z3, z3, z3, z3,
-                  np.zeros((n_rve, 0, 4)), z3, np.zeros((n_rve, 0)), z3)
+                                     rve_controls(ctl, r), out[r], hw, hertz)
 
 
 @njit(cache=True)
 def advance_rve(nsteps, law, st, ctl, out):
     """_advance_rve of a plain-sphere RVE with the history's width and the contact law as
     constants (for callers that schedule RVEs themselves: benchmarks/)."""
-    cl = rve_clumps(no_clumps(1), 0)
     hw = 6 if st.ft.shape[2] == 6 else 3
     if law.hertz_kn > 0.0:
         if hw == 6:
-            return _advance_rve(nsteps, law, st, cl, ctl, out, 6, 1, 0)
-        return _advance_rve(nsteps, law, st, cl, ctl, out, 3, 1, 0)
+            return _advance_rve(nsteps, law, st, None, ctl, out, 6, 1)
+        return _advance_rve(nsteps, law, st, None, ctl, out, 3, 1)
     if hw == 6:
-        return _advance_rve(nsteps, law, st, cl, ctl, out, 6, 0, 0)
-    return _advance_rve(nsteps, law, st, cl, ctl, out, 3, 0, 0)
+        return _advance_rve(nsteps, law, st, None, ctl, out, 6, 0)
+    return _advance_rve(nsteps, law, st, None, ctl, out, 3, 0)
