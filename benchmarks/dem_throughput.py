@@ -195,6 +195,38 @@ def cuda_throughput(base: RVEBatch, cp: engine.ContactParams, dt: float, rves: i
     return res
 
 
+def clump_packing(params: RVEParams) -> RVEBatch:
+    """The 400 two-sphere clumps of tests/data/triaxial_clumps/elongated.txt, at rest."""
+    from pathlib import Path
+
+    from grainscale.io.packing import load_packing
+
+    path = Path(__file__).resolve().parents[1] / "tests" / "data" / "triaxial_clumps"
+    return load_packing(path / "elongated.txt", params)
+
+
+def ns_clumps(base: RVEBatch, cp: engine.ContactParams, dt: float, steps: int,
+              one_sphere: bool = False) -> float:
+    """ns per member-step of `base` in shear as clumps: with one_sphere, each sphere of a
+    sphere packing made a clump of its own (mass and inertia the sphere's)."""
+    from grainscale.dem import clump
+    from grainscale.dem.state import from_clumps
+
+    b = base.copy()
+    if one_sphere:
+        x = b.s[0] @ b.h[0].T
+        one = clump.template("sphere")
+        grains = [clump.scaled(one, r) for r in b.radius[0]]
+        q = np.tile([1.0, 0.0, 0.0, 0.0], (b.n_particles, 1))
+        c = from_clumps(b.h[0], x, q, grains, 1.0)
+        c.bm[0] = c.mass[0] = b.mass[0]
+        c.bj[0] = b.inertia[0][:, None]
+        c.inertia[0] = b.inertia[0]
+        b = c
+    engine.advance(b, 10, dt, cp, shear_control(b))
+    return time_steps(b, cp, shear_control(b), dt, steps) / (steps * b.n_particles) * 1e9
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
@@ -284,6 +316,17 @@ def main() -> None:
     print(f"Hertz-Mindlin (same packing and dt): {ns_h:.1f} ns/particle-step, "
           f"{ns_h / ns_default:.2f} x the linear law")
 
+    # clumps: the same packing as one-sphere clumps (the body step, member placement and
+    # the branch between centres in place of the spheres' integration), and the 400
+    # two-sphere clumps of tests/data/triaxial_clumps (800 members, its own contacts)
+    ns_c1 = ns_clumps(base, cp, dt, steps, one_sphere=True)
+    print(f"one-sphere clumps (same packing and dt): {ns_c1:.1f} ns/particle-step, "
+          f"{ns_c1 / ns_default:.2f} x spheres")
+    elongated = clump_packing(params)
+    ns_c2 = ns_clumps(elongated, cp, engine.critical_dt(elongated, cp), steps)
+    print(f"400 two-sphere clumps (800 members): {ns_c2:.1f} ns/member-step, "
+          f"{ns_c2 / ns_default:.2f} x spheres, {2 * ns_c2:.1f} ns/clump-step")
+
     # batch of RVEs: copies with different velocities so they decorrelate
     rng = np.random.default_rng(0)
     batch = decorrelated_batch(base, args.batch, rng)
@@ -336,7 +379,8 @@ def main() -> None:
         "bytes_per_particle": round(mem / (args.batch * n)),
         "skin_variants_ns": {str(s): round(v, 2) for s, v, _ in rows},
         "restitution_0.9_ns": round(ns_e, 2), "rolling_ns": round(ns_r, 2),
-        "hertz_mindlin_ns": round(ns_h, 2),
+        "hertz_mindlin_ns": round(ns_h, 2), "one_sphere_clumps_ns": round(ns_c1, 2),
+        "two_sphere_clumps_ns_per_member": round(ns_c2, 2),
         "scheduling_efficiency": {
             name: {v: round(t["ideal"] / t[v], 3) for v in ("split", "dealt", "blocks")}
             for name, t in sched.items()},

@@ -23,7 +23,7 @@ from grainscale.config.case import load_rve_case
 from grainscale.config.rve import RVEParams, TriaxialTest
 from grainscale.dem import element_tests
 from grainscale.dem.state import from_packing
-from grainscale.io.packing import read_packing
+from grainscale.io.packing import load_packing, read_packing
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "triaxial_150"
 
@@ -238,3 +238,57 @@ def test_triaxial_800_hertz_mindlin_against_yade():
     np.testing.assert_allclose(qp[:2], ref[:2, 1], rtol=0, atol=5e-3)
     np.testing.assert_allclose(ev[:2], ref[:2, 2], rtol=0, atol=3e-5)
     check_bands(a, qp, ev, ref)
+
+
+def band_figures(a, qp, ev):
+    """check_bands' measures of one run: smoothed peak of q/p, residual (mean over the
+    last 5 % of strain), eps_v at 10 and 20 % axial strain."""
+    last = a > a[-1] - 0.05
+    at = [ev[int(np.argmin(np.abs(a - s)))] for s in (0.1, 0.2)]
+    return np.array([smooth(qp, 5).max(), qp[last].mean(), *at])
+
+
+@pytest.mark.validation
+@pytest.mark.parametrize("name", ["elongated", "tetrahedral"])
+def test_triaxial_of_clumps_against_yade(name):
+    """Clumps (docs/dem.md) against YADE 2023.02a: the packings of
+    examples/rve/clumps.toml (400 two-sphere clumps, aspect 1.5) and
+    clumps_tetrahedral.toml (200 four-sphere tetrahedral clumps), both with the linear
+    law of the unit element, in the drained triaxial at 100 kPa, 0.25 /s to 30 %, against
+    YADE's runs of the same packing with appendClumped (tests/data/triaxial_clumps).
+
+    1. The first row (0.2 % axial strain, before slip events part the runs), from rest:
+       q/p within 3e-3 and eps_v within 2e-4 of YADE's (measured 4e-4 and 2e-5 for the
+       rods, 7e-4 and 8e-5 for the tetrahedra; YADE integrates each clump's mass and
+       inertia on its own grid, 0.2 % and 1 % from grainscale's).
+    2. Issue 58's bands on the means over realisations: peak q/p within 5 %, residual
+       within 10 %, eps_v within 0.01 at 10 and 20 %, grainscale's mean over five (from
+       rest and four with velocities perturbed by 1e-9 m/s: studies/grains/
+       against_yade.py's) against YADE's over its five stored runs. These loose packings
+       (porosity 0.419 and 0.466) contract by 5-7 % and one realisation's peak strays by
+       5 % (one standard deviation) from another's, so one run against one run is no
+       test of the law (docs/validation.md §4.2). Measured: rods 0.1 %, 0.03 %, 0.0018,
+       0.0017; tetrahedra 3.4 %, 3.6 %, 0.0006, 0.0064."""
+    example = {"elongated": "clumps.toml", "tetrahedral": "clumps_tetrahedral.toml"}[name]
+    case = load_rve_case(Path(__file__).resolve().parents[2] / "examples" / "rve" / example)
+    data = DATA.parent / "triaxial_clumps"
+    refs = [np.loadtxt(f, delimiter=",", skiprows=1)[1:]
+            for f in sorted(data.glob(f"yade_{name}*.csv"))]
+    ours = []
+    for k in range(5):
+        b = load_packing(data / f"{name}.txt", case.rve)
+        assert b.clumped
+        if k > 0:
+            b.bv += np.random.default_rng(k - 1).normal(0.0, 1e-9, b.bv.shape)
+        a, qp, ev = curves(element_tests.triaxial(b, case.rve, case.triaxial))
+        if k == 0:
+            ref = refs[0]  # yade_NAME.csv: from rest
+            assert abs(ref[0, 0] - a[0]) < 1e-5
+            assert abs(qp[0] - ref[0, 1]) < 3e-3 and abs(ev[0] - ref[0, 2]) < 2e-4
+        assert abs(a[-1] - 0.3) < 0.005
+        ours.append(band_figures(a, qp, ev))
+    mine = np.mean(ours, axis=0)
+    theirs = np.mean([band_figures(r[:, 0], r[:, 1], r[:, 2]) for r in refs], axis=0)
+    assert abs(mine[0] / theirs[0] - 1.0) < 0.05, (mine, theirs)
+    assert abs(mine[1] / theirs[1] - 1.0) < 0.10, (mine, theirs)
+    assert np.all(np.abs(mine[2:] - theirs[2:]) < 0.01), (mine, theirs)

@@ -28,6 +28,18 @@ sqrt(R*) delta^(3/2) and k_s = 8 G* a (E* = E/(2 (1 - NU^2)), G* = E/(4 (1 + NU)
 dt = 0.3 sqrt(m_min / (E* r_max sqrt(0.01))) (engine.critical_dt at the default
 rve.numerics.max_overlap); the servo's C_kk reads each contact's tangent kn, as the
 linear law's reads its kn.
+
+A packing of clumps (a fifth column, the clump of each member: io/packing.py) is built
+with O.bodies.appendClumped, one clump per id; YADE integrates each clump's union of
+spheres on a grid (discretization=DISCRETIZATION cells along the smallest member
+diameter) for its mass and inertia, independently of grainscale's voxels. Contacts
+inside a clump are not made (YADE's rule). utils.getStress() sums the Love-Weber branch
+between the clumps' positions (their centres of mass), as grainscale's clump kernel
+does: on tests/data/triaxial_clumps/tetrahedral.txt after one step it gives sigma_xx =
+-95168 Pa where grainscale's refreshed packing has -95175 Pa and the sum between member
+centres would be -63012 Pa. The servo's C_kk = (1/V) sum kn (b_k n_k)^2 takes that
+branch b too. dt = 0.3 sqrt(m/(E r_max)) with m the least over clumps of min(M,
+J_min/l^2), l a clump's largest reach from its centre (engine.critical_dt for clumps).
 """
 import math
 import sys
@@ -66,9 +78,11 @@ ALPHA_R = float(sys.argv[6]) if len(sys.argv) > 6 else 0.0
 ETA_R = float(sys.argv[7]) if len(sys.argv) > 7 else 0.0
 INTERVAL = 0.002
 
+DISCRETIZATION = 20
 lines = [ln for ln in open(packing) if not ln.startswith("#")]
 h = np.array([float(v) for v in lines[0].split()]).reshape(3, 3)
 data = np.array([[float(v) for v in ln.split()] for ln in lines[1:] if ln.strip()])
+CLUMPS = data.shape[1] == 5
 O.periodic = True
 O.cell.hSize = Matrix3(*h.ravel())
 if HERTZ:
@@ -84,12 +98,29 @@ else:
     mat = O.materials.append(FrictMat(young=E, poisson=RATIO, frictionAngle=math.atan(MU),
                                       density=RHO))
 rng = np.random.default_rng(seed) if seed >= 0 else None
-for x, y, z, r in data:
-    b = utils.sphere(Vector3(x, y, z), r, material=mat)
-    O.bodies.append(b)
-    if rng is not None:  # a different realisation: grain velocities differ by ~1e-9 m/s
-        b.state.vel = Vector3(*rng.normal(0.0, 1e-9, 3))
-m_min = RHO * 4.0 / 3.0 * math.pi * data[:, 3].min() ** 3
+clump_of = {}  # member id -> clump id (YADE's)
+if CLUMPS:
+    m_min = np.inf
+    for k in np.unique(data[:, 4]):
+        rows = data[data[:, 4] == k]
+        cid, ids = O.bodies.appendClumped(
+            [utils.sphere(Vector3(x, y, z), r, material=mat) for x, y, z, r, _ in rows],
+            discretization=DISCRETIZATION)
+        for i in ids:
+            clump_of[i] = cid
+        st = O.bodies[cid].state
+        reach = max(np.linalg.norm(np.array(O.bodies[i].state.pos - st.pos))
+                    + O.bodies[i].shape.radius for i in ids)
+        m_min = min(m_min, st.mass, min(st.inertia) / reach**2)
+        if rng is not None:
+            st.vel = Vector3(*rng.normal(0.0, 1e-9, 3))
+else:
+    for x, y, z, r in data:
+        b = utils.sphere(Vector3(x, y, z), r, material=mat)
+        O.bodies.append(b)
+        if rng is not None:  # a different realisation: grain velocities differ by ~1e-9 m/s
+            b.state.vel = Vector3(*rng.normal(0.0, 1e-9, 3))
+    m_min = RHO * 4.0 / 3.0 * math.pi * data[:, 3].min() ** 3
 O.dt = 0.3 * math.sqrt(m_min / (E * data[:, 3].max()))
 if HERTZ:
     E_STAR = E / (2.0 * (1.0 - NU * NU))
@@ -116,6 +147,7 @@ V0 = abs(np.linalg.det(h))
 
 
 def stiffness():
+    """C_kk of the servo (module docstring)."""
     V = O.cell.volume
     c = np.zeros(3)
     for i in O.interactions:
@@ -123,7 +155,13 @@ def stiffness():
             continue
         n = np.array(i.geom.normal)
         d = (i.geom.refR1 + i.geom.refR2 - i.geom.penetrationDepth)
-        c += i.phys.kn * d * d * n**4
+        if not CLUMPS:
+            c += i.phys.kn * d * d * n**4
+            continue
+        ri = np.array(O.bodies[i.id1].state.pos - O.bodies[clump_of[i.id1]].state.pos)
+        rj = np.array(O.bodies[i.id2].state.pos - O.bodies[clump_of[i.id2]].state.pos)
+        b = d * n - rj + ri
+        c += i.phys.kn * (b * n) ** 2
     return c / V
 
 
