@@ -175,15 +175,20 @@ def from_packing(h: np.ndarray, positions: np.ndarray, radii: np.ndarray, densit
     s = np.linalg.solve(h, np.asarray(positions, float).T).T
     s -= np.floor(s)
     m = density * (4.0 / 3.0) * np.pi * radii**3
-    for r in range(n_copies):
-        b.h[r] = h
-        b.h0[r] = h
-        b.h_ref[r] = h
-        b.s[r] = s
-        b.radius[r] = radii
-        b.mass[r] = m
-        b.inertia[r] = 0.4 * m * radii**2
+    _place(b, h, s, radii, m, 0.4 * m * radii**2)
     return b
+
+
+def _place(b: RVEBatch, h, s, radius, mass, inertia) -> None:
+    """Every RVE of b at rest in cell h (also its reference and build cell) with the
+    spheres at fractional s."""
+    b.h[:] = h
+    b.h0[:] = h
+    b.h_ref[:] = h
+    b.s[:] = s
+    b.radius[:] = radius
+    b.mass[:] = mass
+    b.inertia[:] = inertia
 
 
 def from_clumps(h: np.ndarray, centres: np.ndarray, quats: np.ndarray, grains: list,
@@ -225,22 +230,15 @@ def from_clumps(h: np.ndarray, centres: np.ndarray, quats: np.ndarray, grains: l
     s = sb[body] + off @ hinv.T
     bm = density * np.array([g.volume for g in grains])
     bj = density * np.array([g.inertia for g in grains])
-    for r in range(n_copies):
-        b.h[r] = h
-        b.h0[r] = h
-        b.h_ref[r] = h
-        b.s[r] = s
-        b.radius[r] = radius
-        b.mass[r] = bm[body]
-        b.inertia[r] = bj.min(axis=1)[body]
-        b.body[r] = body
-        b.rho[r] = rho
-        b.off[r] = off
-        b.bs[r] = sb
-        b.bq[r] = quats
-        b.bm[r] = bm
-        b.bj[r] = bj
-        b.bvol[r] = [g.volume for g in grains]
+    _place(b, h, s, radius, bm[body], bj.min(axis=1)[body])
+    b.body[:] = body
+    b.rho[:] = rho
+    b.off[:] = off
+    b.bs[:] = sb
+    b.bq[:] = quats
+    b.bm[:] = bm
+    b.bj[:] = bj
+    b.bvol[:] = [g.volume for g in grains]
     return b
 
 
