@@ -30,6 +30,7 @@ import numpy as np
 from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams, min_particles
 from grainscale.dem import clump, engine, hertz, homogenise
+from grainscale.dem.quaternion import matrix
 from grainscale.dem.state import RVEBatch, from_clumps, from_packing
 
 
@@ -126,12 +127,10 @@ def insert_clumps(n: int, rmin: float, rmax: float, shape, porosity: float,
     pos = np.empty((n, 3))
     members = np.empty((0, 3))
     radii = np.empty(0)
+    rot = np.empty((3, 3))
     for placed, idx in enumerate(order):
         g = grains[idx]
-        w, x, y, z = quats[idx]
-        rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        matrix(quats[idx], rot)
         off = g.offsets @ rot.T
         for _ in range(100_000):
             trial = rng.uniform(0.0, side, 3)

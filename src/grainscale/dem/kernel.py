@@ -819,13 +819,14 @@ def _advance_rve(nsteps, law, st, cl, ctl, out, hw, hertz):
             stiff_out = stiff_scratch if servo_on else stiffness
             ncontact, fsum, omax = contact_pass(0.0, law, st, cl, hw, hertz, table, stress,
                                                 stiff_out, True, False, not servo_on)
+            grains = n
             if cl is not None:  # per body: a member's force is not a grain's
                 rigid.reduce(cl.body, cl.off, force, torque, bforce, btorque)
                 fres, ekin = rigid.residuals(cl, bforce, rmat)
-                fres *= n / nb
+                grains = nb
             else:
                 fres, ekin = _residuals(force, v, w, mass, inertia)
-            out[1] = (fres / n) / (fsum / ncontact) if ncontact > 0 else 0.0
+            out[1] = (fres / grains) / (fsum / ncontact) if ncontact > 0 else 0.0
             out[2] = ekin
             out[5] = omax
     out[0] = ncontact
@@ -853,7 +854,7 @@ def advance_batch(nsteps, law, st, ctl, status, out, cl=None):
     nthr = max(1, min(get_num_threads(), st.s.shape[0]))
     rolling = st.ft.shape[3] == 6
     bounds = split_by_cost(nsteps, nthr)
-    if cl is not None and cl.bm.shape[1] > 0:
+    if cl is not None:
         _advance_split_clumps(nsteps, law, st, cl, ctl, status, out, bounds,
                               6 if rolling else 3, 1 if law.hertz_kn > 0.0 else 0)
         return

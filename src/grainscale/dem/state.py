@@ -258,15 +258,15 @@ def from_members(h: np.ndarray, centres: np.ndarray, radii: np.ndarray,
         raise ValueError(f"clump ids must be 0..B-1 without gaps; got {ids.size} ids up to "
                          f"{int(ids.max())}")
     hinv = np.linalg.inv(h)
-    grains, com, quats = [], np.empty((ids.size, 3)), np.empty((ids.size, 4))
+    clumps = []
     for k in ids:
         x = centres[bodies == k]
         f = (x - x[0]) @ hinv.T
         x = x[0] + (f - np.round(f)) @ h.T  # one image
-        grains.append(None)
-        grains[k], com[k], quats[k] = clump.from_members(x, radii[bodies == k])
-    b = from_clumps(h, com, quats, grains, density, n_copies, capacity, history)
-    return b
+        clumps.append(clump.from_members(x, radii[bodies == k]))
+    grains, com, quats = zip(*clumps, strict=True)
+    return from_clumps(h, np.array(com), np.array(quats), list(grains), density, n_copies,
+                       capacity, history)
 
 
 def member_positions(b: RVEBatch, r: int = 0) -> np.ndarray:
