@@ -391,6 +391,7 @@ def test_a_checkpoint_from_before_hertz_mindlin_resumes_and_a_hertzian_case_roun
     for k in ("contact_law", "poisson_ratio"):
         del old["rve"][k]
     del old["rve"]["numerics"]["max_overlap"]
+    del old["rve"]["clump"]  # came later still, with the clumps: None is no change
     assert changed_keys(old, new) == []
     new["rve"].update(contact_law="hertz_mindlin", poisson_ratio=0.25)
     assert {k for k, _, _ in changed_keys(old, new)} >= {"rve.contact_law",
@@ -400,3 +401,6 @@ def test_a_checkpoint_from_before_hertz_mindlin_resumes_and_a_hertzian_case_roun
     assert "stiffness_ratio" not in dumped
     assert RVEParams(**dumped) == hz
     assert "stiffness_ratio" in RVEParams().model_dump()
+    clumped = json.loads(json.dumps(new))
+    clumped["rve"]["clump"] = {"template": "elongated", "aspect": 1.5, "spheres": 2}
+    assert "rve.clump.template" in {k for k, _, _ in changed_keys(old, clumped)}

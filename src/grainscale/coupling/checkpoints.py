@@ -68,6 +68,9 @@ ADDED = {"update_tolerance": 0.0, "max_deferred_steps": 20}
 # [rve] keys added with the Hertz-Mindlin law: absent from an older checkpoint's case,
 # they change nothing while the law is the linear one it ran with
 RVE_ADDED = ("rve.contact_law", "rve.poisson_ratio", "rve.numerics.max_overlap")
+# [rve] keys added later still, with the value that keeps an older checkpoint's physics
+# (no clumps: the grains are the spheres it ran with)
+RVE_ADDED_AT = {"rve.clump": None}
 
 
 class Checkpoint(NamedTuple):
@@ -358,7 +361,8 @@ def changed_keys(old: dict, new: dict) -> list[tuple[str, object, object]]:
                      and k.rsplit(".", 1)[-1] in ADDED
                      and b[k] == ADDED[k.rsplit(".", 1)[-1]])
             and not (k not in a and k in RVE_ADDED
-                     and b.get("rve.contact_law", "linear") == "linear")]
+                     and b.get("rve.contact_law", "linear") == "linear")
+            and not (k not in a and k in RVE_ADDED_AT and b[k] == RVE_ADDED_AT[k])]
 
 
 def check_case(found: Checkpoint, case: dict, allowed: list[str]) -> None:
