@@ -492,3 +492,29 @@ def test_ranks_know_their_place_on_the_node(tmp_path):
     assert r.returncode == 0, r.stderr
     found = [tuple(map(int, (tmp_path / f"rank{k}").read_text().split())) for k in range(3)]
     assert found == [(0, 3), (1, 3), (2, 3)]  # one machine: one node
+
+
+@pytest.mark.validation  # ~3 min: the clumped kernel variant compiles, five runs
+def test_clumped_rves_across_ranks_threads_retiling_and_restart(rve_case, tmp_path):
+    """RVEs of rigid two-sphere clumps (aspect 1.5, 160 clumps from a library of 4)
+    whose cells are all doubled at their first update (retile.multiply_cell: bodies
+    copied, each member given to the body copy its image lies in): one history.csv, to
+    the byte, on 1 rank with 1 and 2 threads, on 2 ranks, and on 3 ranks stopped at step
+    9 and resumed on 2 (the clump arrays travel through the MPI exchange and the
+    checkpoint's parts, padded to the most clumps)."""
+    case = tomllib.loads(rve_case.read_text())
+    case["rve"].update(particles=160, clump={"template": "elongated", "aspect": 1.5,
+                                             "spheres": 2})
+    for key in ("porosity", "porosity_tolerance"):  # consolidated at 100 kPa, as clumps.toml
+        del case["rve"]["preparation"][key]
+    case["materials"]["sand"].update({"retile_width": 20.0, "retile_max_factor": 2})
+    path = tmp_path / "clumps.toml"
+    path.write_text(tomli_w.dumps(case))
+    ref = tmp_path / "serial"
+    assert main(["run", str(path), "--out", str(ref), "--quiet", "--threads", "1"]) == 0
+    history = (ref / "history.csv").read_text()
+    assert history.count("\n") > 20
+    sizes = meshio.read(sorted((ref / "frames").glob("frame_*.vtu"))[-1]).point_data
+    assert set(np.unique(sizes["rve_particles"])) == {640.0}  # every cell doubled
+
+    same_history_everywhere(path, ref, tmp_path, stop_at=9)

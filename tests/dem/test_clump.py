@@ -218,9 +218,9 @@ def test_bad_clump_tables_name_the_key(table, match):
         RVEParams(clump=table)
 
 
-def test_a_clumped_rve_is_refused_by_the_multiscale_solver():
-    """A 'dem' material whose [rve] has clumps is refused before anything runs: the
-    multiscale solver's checkpoints, MPI exchange and CUDA path do not carry them yet."""
+def test_clumped_rves_are_refused_on_the_gpu_only():
+    """A 'dem' material whose [rve] has clumps runs on the CPU; with solver.device =
+    'cuda' it is refused before anything runs (the CUDA kernel has no rigid-body step)."""
     from pathlib import Path
 
     from grainscale.config.base import ConfigError
@@ -230,5 +230,48 @@ def test_a_clumped_rve_is_refused_by_the_multiscale_solver():
     root = Path(__file__).resolve().parents[2]
     case = load_case(root / "examples" / "column_collapse" / "quick.toml")
     case.rve.clump = ClumpShape(template="tetrahedral")
-    with pytest.raises(ConfigError, match=r"\[rve.clump\]"):
+    check_case(case)
+    case.solver.device = "cuda"
+    with pytest.raises(ConfigError, match=r"solver.device = 'cuda' with \[rve.clump\]"):
         check_case(case)
+
+
+@pytest.mark.parametrize("k,m", [(0, 2), (2, 3)])
+def test_a_clumped_cell_taken_m_times_places_every_member_exactly(k, m):
+    """retile.multiply_cell of a clumped RVE: m copies of every body, each member given
+    to the body copy its periodic image lies in, so that s_i = S_b + h^-1 R rho_i +
+    image_i holds with integer images in the new cell (1e-12: one rounding of the
+    fractional coordinates); a member given to its own copy's body would be 1/m of a cell
+    off. The padded checkpoint table of the original (to the copy's sphere and clump
+    counts) reads back to the original's arrays."""
+    from grainscale.dem import generate
+    from grainscale.dem.quaternion import matrix
+    from grainscale.dem.retile import multiply_cell
+    from grainscale.dem.state import from_clumps, padded, state_arrays, unpadded
+
+    rng = np.random.default_rng(5)
+    shape = clump.template("elongated", aspect=1.6, spheres=2)
+    h, pos, q, grains = generate.insert_clumps(120, 1e-3, 1.4e-3, shape, 0.75, rng)
+    b = from_clumps(h, pos, q, grains, 2650.0)
+    b.s[0] += 0.37  # members across the faces: their images differ from their body's
+    b.bs[0] += 0.37
+    assert np.abs(b.image[0]).max() == 0
+    b.image[0] -= np.floor(b.s[0])
+    b.s[0] -= np.floor(b.s[0])
+    assert np.abs(b.image[0]).max() > 0
+    c = multiply_cell(b, 0, k, m)
+    assert (c.n_particles, c.n_bodies) == (m * b.n_particles, m * b.n_bodies)
+    np.testing.assert_array_equal(np.bincount(c.body[0]), np.tile(np.bincount(b.body[0]), m))
+    for x in (b, c):
+        rot = np.empty((x.n_bodies, 3, 3))
+        for j in range(x.n_bodies):
+            matrix(x.bq[0, j], rot[j])
+        off = np.einsum("nab,nb->na", rot[x.body[0]], x.rho[0])
+        placed = x.bs[0, x.body[0]] + np.linalg.solve(x.h[0], off.T).T + x.image[0]
+        np.testing.assert_allclose(placed, x.s[0], rtol=0, atol=1e-12)
+    assert c.solid_volume()[0] == pytest.approx(m * b.solid_volume()[0], rel=1e-12)
+    table = padded(state_arrays(b), c.n_particles, b.capacity, c.n_bodies)
+    assert table["bm"].shape[1] == c.n_bodies and table["body"].shape[1] == c.n_particles
+    back = unpadded(table, b.n_particles, b.n_bodies)
+    for name, v in state_arrays(b).items():
+        np.testing.assert_array_equal(back[name], v, err_msg=name)

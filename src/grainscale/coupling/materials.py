@@ -99,8 +99,9 @@ def packing_library(case: Case, name: str, case_dir: Path, out: Path,
     levels = cfg.geostatic_pressures
     if progress:
         at = f" at each of {levels} Pa" if levels else ""
+        grains = "clumps" if case.rve.clump is not None else "spheres"
         print(f"preparing {cfg.library} packing(s){at} for material {name!r} "
-              f"({case.rve.particles} spheres each)", file=sys.stderr)
+              f"({case.rve.particles} {grains} each)", file=sys.stderr)
     if not levels:
         return [cached_packing(case.rve, k, out / "packings" / f"{name}_{k}.h5", progress)
                 for k in range(cfg.library)]

@@ -46,6 +46,7 @@ from grainscale.coupling import predictor
 from grainscale.dem import engine, homogenise, lattice, retile
 from grainscale.dem.generate import contact_params
 from grainscale.dem.state import (
+    CLUMP_FIELDS,
     SLOT_FIELDS,
     SPHERE_FIELDS,
     STATE_FIELDS,
@@ -66,8 +67,10 @@ from grainscale.mpm.step import SimulationError
 
 
 def bulk_density(library: list[RVEBatch]) -> float:
-    """Mean grain mass per cell volume of the packings [kg/m^3]."""
-    return float(np.mean([b.mass[0].sum() / b.volume()[0] for b in library]))
+    """Mean grain mass per cell volume of the packings [kg/m^3] (a clump's mass once,
+    not its members' each)."""
+    return float(np.mean([rve_constants(b)["grain_mass"][0] / b.volume()[0]
+                          for b in library]))
 
 
 def _sym(sigma: np.ndarray) -> np.ndarray:
@@ -120,15 +123,24 @@ def list_capacity(library: list[RVEBatch]) -> int:
 
 
 def rve_state_bytes(batch: RVEBatch) -> int:
-    """Bytes of one RVE's state (state.STATE_FIELDS) in a group like `batch`."""
-    return sum(getattr(batch, name).itemsize * int(np.prod(getattr(batch, name).shape[1:]))
-               for name in STATE_FIELDS)
+    """Bytes of one RVE's state (state.state_arrays) in a group like `batch`."""
+    return sum(v.itemsize * int(np.prod(v.shape[1:])) for v in state_arrays(batch).values())
 
 
 def _counts(state: dict[str, np.ndarray]) -> np.ndarray:
     """(P,) spheres of each RVE of a saved state (older states: all the stored count)."""
     s = state["rve_s"]
     return np.asarray(state.get("rve_particles", np.full(len(s), s.shape[1])))
+
+
+def _bodies(state: dict[str, np.ndarray]) -> np.ndarray:
+    """(P,) clumps of each RVE of a saved state (0: plain spheres)."""
+    return np.asarray(state.get("rve_bodies", np.zeros(len(state["rve_s"]), np.int64)))
+
+
+def _state_names(state: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """The state.state_arrays names a saved state holds (CLUMP_FIELDS where clumped)."""
+    return STATE_FIELDS + (CLUMP_FIELDS if "rve_bm" in state else ())
 
 
 class RVEMaterial:
@@ -615,19 +627,21 @@ class RVEMaterial:
     def state(self) -> dict[str, np.ndarray]:
         """Per point: the RVE's full state, padded to the largest sphere count here and
         to the longest neighbour row in use (`rve_particles` holds each RVE's own sphere
-        count, `rve_capacity` its list capacity, restored on loading), and the
+        count, `rve_capacity` its list capacity, restored on loading; clumped RVEs are
+        padded to the most clumps too, `rve_bodies` their own count), and the
         material's per-point arrays."""
         capacity = np.zeros(self.n_points, np.int64)
         self._sync()
         if self.groups:
             n = max(b.n_particles for b in self.groups)
+            nb = max(b.bm.shape[1] for b in self.groups)  # clumps (0: spheres)
             # capacities hold room for the rows to grow (list_capacity, overflows):
             # tables cut to the rows' longest count are smaller
             k = max(max(self._longest_row(b) for b in self.groups), 1)
             arrays = {}
             for b, rows in zip(self.groups, self.rows, strict=True):
                 for at, part in self._chunks(b):
-                    for name, v in padded(state_arrays(part), n, k).items():
+                    for name, v in padded(state_arrays(part), n, k, nb).items():
                         if name not in arrays:
                             arrays[name] = np.empty((self.n_points, *v.shape[1:]), v.dtype)
                         arrays[name][rows[at]] = v
@@ -638,6 +652,9 @@ class RVEMaterial:
             counts = np.zeros(0, np.int64)
         out = {f"rve_{k}": v for k, v in arrays.items()}
         out["rve_particles"] = counts
+        if "bm" in arrays:  # clumped: each RVE's clump count
+            out["rve_bodies"] = (self._per_point(lambda b: np.full(b.n_rve, b.bm.shape[1]))
+                                 if self.groups else np.zeros(0, np.int64))
         out["rve_capacity"] = capacity
         out["theta_prev"] = self.theta_prev.copy()  # copies: updated in place later
         out["spin_rate"] = self.spin_rate.copy()
@@ -683,20 +700,21 @@ class RVEMaterial:
         per_slot = sum(getattr(widest, f).itemsize * int(np.prod(getattr(widest, f).shape[3:]))
                        for f in SLOT_FIELDS)
         per_rve = sum(getattr(widest, f).itemsize * int(np.prod(getattr(widest, f).shape[1:]))
-                      for f in STATE_FIELDS if f not in SPHERE_FIELDS)
+                      for f in state_arrays(widest) if f not in SPHERE_FIELDS)
         chunk = CHUNK_BYTES if any(self._lean(b) is not None for b in self.groups) else 0
         return self.n_points * (per_rve + n * (per_sphere + k * per_slot)) + chunk
 
     def load_state(self, state: dict[str, np.ndarray]) -> None:
-        arrays = {k: np.asarray(state[f"rve_{k}"]) for k in STATE_FIELDS}
+        arrays = {k: np.asarray(state[f"rve_{k}"]) for k in _state_names(state)}
         counts = _counts(state)
+        bodies = _bodies(state)
         self.n_points = len(counts)
         self.groups, self.rows = [], []
         self._storage = {}
         capacity = state.get("rve_capacity")  # absent in checkpoints before it
-        for n in np.unique(counts):
-            rows = np.flatnonzero(counts == n)
-            b = from_state_arrays(unpadded({k: v[rows] for k, v in arrays.items()}, int(n)))
+        for n, nb in sorted(set(zip(counts.tolist(), bodies.tolist(), strict=True))):
+            rows = np.flatnonzero((counts == n) & (bodies == nb))
+            b = from_state_arrays(unpadded({k: v[rows] for k, v in arrays.items()}, n, nb))
             if capacity is not None:  # the same capacity as saved: the run continues bitwise
                 grow_capacity(b, int(np.max(capacity[rows])))
             self.groups.append(b)
@@ -748,10 +766,13 @@ class RVEMaterial:
         by different ranks), in order; sphere counts and list capacities may differ."""
         n = max(p["rve_s"].shape[1] for p in parts)
         k = max(p["rve_nbr_j"].shape[2] for p in parts)
-        padded_parts = [padded({f: p[f"rve_{f}"] for f in STATE_FIELDS}, n, k)
-                        for p in parts]
-        out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in STATE_FIELDS}
+        names = _state_names(parts[0])
+        nb = max(p["rve_bm"].shape[1] for p in parts) if "bm" in names else 0
+        padded_parts = [padded({f: p[f"rve_{f}"] for f in names}, n, k, nb) for p in parts]
+        out = {f"rve_{f}": np.concatenate([q[f] for q in padded_parts]) for f in names}
         out["rve_particles"] = np.concatenate([_counts(p) for p in parts])
+        if nb:
+            out["rve_bodies"] = np.concatenate([_bodies(p) for p in parts])
         for key in ("theta_prev", "spin_rate", "assignment", "work", "rve_capacity", "H_acc",
                     "deferred", "t_acc", "updates", "dem_steps"):
             if all(key in p for p in parts):

@@ -39,7 +39,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from grainscale.config.base import ConfigError
 from grainscale.config.rve import RVEParams, ShearTest
 from grainscale.dem import element_tests
 from grainscale.dem.retile import multiply_cell
@@ -88,15 +87,18 @@ def tile(batch: RVEBatch, n: int, seed: int = 0) -> RVEBatch:
     big = batch.take([0])
     if n == 1:
         return big
-    if big.clumped:
-        raise ConfigError(f"tiles = {n}: supercells of clumps ([rve.clump]) are not made "
-                          "yet; valid: tiles = 1 with clumps")
     for k in range(3):
         big = multiply_cell(big, 0, k, n)
     rng = np.random.default_rng(seed)
-    dx = 1e-6 * batch.radius[0].min() * rng.standard_normal(big.s[0].shape)
-    big.s[0] += np.linalg.solve(big.h[0], dx.T).T
-    big.s[0] -= np.floor(big.s[0])
+    if big.clumped:  # a clump moves whole: its centre and its members by one shift
+        dx = 1e-6 * batch.radius[0].min() * rng.standard_normal(big.bs[0].shape)
+        ds = np.linalg.solve(big.h[0], dx.T).T
+        big.bs[0] += ds
+        big.s[0] += ds[big.body[0]]
+    else:
+        dx = 1e-6 * batch.radius[0].min() * rng.standard_normal(big.s[0].shape)
+        big.s[0] += np.linalg.solve(big.h[0], dx.T).T
+        big.s[0] -= np.floor(big.s[0])
     big.s_ref[0] = big.s[0]
     return big
 

@@ -46,11 +46,9 @@ def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
     moment on j are each the opposite of the other grain's). The rebuild before the next
     step matches these entries by partner and image, so every contact keeps its history.
     """
-    if b.clumped:
-        raise ValueError("a clumped RVE cannot be taken several times yet (retiling, "
-                         "supercells); valid: an RVE of spheres")
     n = b.n_particles
-    out = allocate(1, m * n, b.capacity, b.ft.shape[3])  # grown below if a row gets longer
+    nb = b.bm.shape[1]  # clumps (0: plain spheres)
+    out = allocate(1, m * n, b.capacity, b.ft.shape[3], m * nb)  # grown if a row is longer
     scale = np.ones(3)
     scale[k] = m
     out.h[0] = b.h[r] * scale[None, :]
@@ -67,6 +65,8 @@ def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
         getattr(out, name)[0] = np.concatenate([getattr(b, name)[r]] * m)
     for name in ("L", "stress", "stress_servo", "stiffness", "step_count", "unbalanced"):
         getattr(out, name)[0] = getattr(b, name)[r]
+    if nb:
+        _multiply_clumps(b, r, k, m, out)
     out.ncontact[0] = m * b.ncontact[r]
     out.kinetic[0] = m * b.kinetic[r]
     out.need_rebuild[0] = 1
@@ -107,3 +107,27 @@ def multiply_cell(b: RVEBatch, r: int, k: int, m: int) -> RVEBatch:
     out.ft[0][a, slot] = f
     out.nbr_count[0] = counts
     return out
+
+
+def _multiply_clumps(b: RVEBatch, r: int, k: int, m: int, out: RVEBatch) -> None:
+    """The clumps of RVE r of b in the cell taken m times along edge k (multiply_cell):
+    body B_b of copy c is b + cB, its centre (S + c e_k)/m, everything else as the
+    original's. A member sits on the periodic image `image` of its body (s_i = S_b +
+    h^-1 R rho_i + image_i, rigid.py), so copy c of member i belongs to the body copy
+    c_b = (c + image_k) mod m with image_k' = floor((c + image_k) / m): the same
+    bookkeeping as the neighbour pairs' images, which keeps s_i' = S_b' + h'^-1 R rho_i +
+    image_i' exact (h'^-1 has row k divided by m)."""
+    n, nb = b.n_particles, b.bm.shape[1]
+    for name in ("bv", "bw", "bq", "bl", "bm", "bj", "bvol"):
+        getattr(out, name)[0] = np.concatenate([getattr(b, name)[r]] * m)
+    out.bs[0] = np.concatenate([b.bs[r] + c * np.eye(3)[k] for c in range(m)])
+    out.bs[0, :, k] /= m
+    out.rho[0] = np.concatenate([b.rho[r]] * m)
+    out.off[0] = np.concatenate([b.off[r]] * m)
+    img = np.rint(b.image[r]).astype(np.int64)
+    for c in range(m):
+        ck = c + img[:, k]
+        out.body[0, c * n:(c + 1) * n] = b.body[r] + np.mod(ck, m) * nb
+        image = img.copy()
+        image[:, k] = np.floor_divide(ck, m)
+        out.image[0, c * n:(c + 1) * n] = image

@@ -390,8 +390,11 @@ def with_history(b: RVEBatch, history: int) -> RVEBatch:
     return b
 
 
-# the clump arrays that define a clumped batch's state (`off` is scratch)
-CLUMP_FIELDS = ("body", "rho", "image", "bs", "bv", "bw", "bq", "bl", "bm", "bj", "bvol")
+# the clump arrays that define a clumped batch's state (`off` is scratch): per member
+# sphere (axis 1 the spheres') and per body (axis 1 the bodies')
+MEMBER_FIELDS = ("body", "rho", "image")
+BODY_FIELDS = ("bs", "bv", "bw", "bq", "bl", "bm", "bj", "bvol")
+CLUMP_FIELDS = MEMBER_FIELDS + BODY_FIELDS
 
 
 def state_arrays(b: RVEBatch) -> dict[str, np.ndarray]:
@@ -437,19 +440,23 @@ def with_capacity(b: RVEBatch, capacity: int) -> RVEBatch:
     return b
 
 
-def padded(arrays: dict[str, np.ndarray], n: int, k: int) -> dict[str, np.ndarray]:
-    """`state_arrays` of RVEs with up to n spheres, zero-padded to exactly n spheres and
-    k neighbour slots, so RVEs of different sizes fit in one table (checkpoints). The
-    padding is inert: empty neighbour rows, spheres of zero radius, cut off on reading.
-    Slots beyond k are dropped: k must be at least every row's nbr_count (the slots
-    past a row's count are never read)."""
+def padded(arrays: dict[str, np.ndarray], n: int, k: int,
+           n_bodies: int = 0) -> dict[str, np.ndarray]:
+    """`state_arrays` of RVEs with up to n spheres (and, clumped, up to n_bodies bodies),
+    zero-padded to exactly n spheres, k neighbour slots and n_bodies bodies, so RVEs of
+    different sizes fit in one table (checkpoints). The padding is inert: empty neighbour
+    rows, spheres of zero radius, bodies of zero mass, cut off on reading. Slots beyond k
+    are dropped: k must be at least every row's nbr_count (the slots past a row's count
+    are never read)."""
     out = {}
     for name, v in arrays.items():
         if name in SLOT_FIELDS and v.shape[2] > k:
             v = v[:, :, :k]
         shape = list(v.shape)
-        if name in SPHERE_FIELDS:
+        if name in SPHERE_FIELDS or name in MEMBER_FIELDS:
             shape[1] = n
+        if name in BODY_FIELDS:
+            shape[1] = n_bodies
         if name in SLOT_FIELDS:
             shape[2] = k
         if shape == list(v.shape):
@@ -462,9 +469,16 @@ def padded(arrays: dict[str, np.ndarray], n: int, k: int) -> dict[str, np.ndarra
     return out
 
 
-def unpadded(arrays: dict[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
-    """The first n spheres of padded state arrays (RVEs that all have n spheres)."""
-    return {name: v[:, :n] if name in SPHERE_FIELDS else v for name, v in arrays.items()}
+def unpadded(arrays: dict[str, np.ndarray], n: int,
+             n_bodies: int = 0) -> dict[str, np.ndarray]:
+    """The first n spheres (and n_bodies bodies) of padded state arrays (RVEs that all
+    have n spheres and n_bodies bodies)."""
+    def cut(name, v):
+        if name in SPHERE_FIELDS or name in MEMBER_FIELDS:
+            return v[:, :n]
+        return v[:, :n_bodies] if name in BODY_FIELDS else v
+
+    return {name: cut(name, v) for name, v in arrays.items()}
 
 
 def from_state_arrays(arrays: dict[str, np.ndarray]) -> RVEBatch:
