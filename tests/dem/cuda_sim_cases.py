@@ -28,13 +28,14 @@ from dem_helpers import agitated_dense_state, brute_pairs  # noqa: E402
 
 from grainscale.analysis import read_columns  # noqa: E402
 from grainscale.cli import main as grainscale  # noqa: E402
-from grainscale.dem import cuda_kernel, device_batch, engine  # noqa: E402
+from grainscale.dem import clump, cuda_kernel, device_batch, engine, generate  # noqa: E402
 from grainscale.dem.device_batch import DeviceBatch  # noqa: E402
 from grainscale.dem.retile import double_cell, widths  # noqa: E402
 from grainscale.dem.state import (  # noqa: E402
     STATE_FIELDS,
     RVEBatch,
     concatenate,
+    from_clumps,
     from_packing,
     grow_capacity,
     longest_row,
@@ -134,6 +135,21 @@ def adaptive_unit_element(folder: Path) -> Path:
     return path
 
 
+def clumped_unit_element(folder: Path) -> Path:
+    """`unit_element` with RVEs of 140 rigid two-sphere clumps (aspect 1.6, consolidated
+    at 100 kPa) whose cell is doubled at its first update (retile_width 20 grain
+    diameters): the clumps' kernel, their rows on the device and their retiling."""
+    case = tomllib.loads(unit_element(folder).read_text())
+    case["rve"].update(particles=140, radius_min=1.0e-3, radius_max=1.4e-3,
+                       clump={"template": "elongated", "aspect": 1.6, "spheres": 2})
+    for key in ("porosity", "porosity_tolerance"):
+        del case["rve"]["preparation"][key]
+    case["materials"]["sand"].update(retile_width=20.0, retile_max_factor=2)
+    path = folder / "clumped_unit_element.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
 def column(folder: Path) -> Path:
     """examples/column_collapse/quick.toml shrunk to two material points (a 20 x 10 x
     10 mm column, one point a cell): 5 MPM steps of the geostatic stage with its gate
@@ -217,7 +233,8 @@ def coupled_runs() -> dict:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for make in (unit_element, column, adaptive_unit_element, sleeping_column):
+        for make in (unit_element, column, adaptive_unit_element, sleeping_column,
+                     clumped_unit_element):
             path = make(folder)
             hist = {}
             for device in ("cpu", "cuda"):
@@ -228,7 +245,10 @@ def coupled_runs() -> dict:
                 hist[device] = read_columns(run / "history.csv")
             cost = json.loads((folder / f"{path.stem}_cuda" / "cost.json").read_text())
             res = {"rows": len(hist["cpu"]["step"]), "last": {},
-                   "stepped": cost["fraction_of_rves_stepped"]}
+                   "stepped": cost["fraction_of_rves_stepped"],
+                   "particles": sorted({float(x) for x in meshio.read(sorted(
+                       (folder / f"{path.stem}_cuda" / "frames").glob("frame_*.vtu"))[-1]
+                   ).point_data["rve_particles"]})}
             for name, a in hist["cpu"].items():
                 a, b = np.asarray(a), np.asarray(hist["cuda"][name])
                 res[name] = rel(a, b)
@@ -718,6 +738,40 @@ def more_cases(base, p, dt, ctrl, still, res) -> None:
 
     # 13. an RVEMaterial whose batch is built on the device, against one on the CPU
     res["lean_material"] = lean_material(base, p)
+
+    # 16. clumps (cuda_rigid.py): rigid bodies of two spheres sheared through rebuilds
+    res["clumps"] = clumps_sheared()
+
+
+def clumps_sheared() -> dict:
+    """Section 16: 120 two-sphere clumps (aspect 1.6) consolidated to 100 kPa on the CPU,
+    then 40 steps of a shear of 10 % under a normal-stress servo on both devices: the
+    rigid-body step, the pairs dropped inside clumps, the members' images and the
+    branch between centres in the stress, through list rebuilds."""
+    rng = np.random.default_rng(3)
+    shape = clump.template("elongated", aspect=1.6, spheres=2)
+    h, pos, q, grains = generate.insert_clumps(120, 1e-3, 1.4e-3, shape, 0.75, rng)
+    base = from_clumps(h, pos, q, grains, 2650.0)
+    p = engine.ContactParams(young=1e8, stiffness_ratio=0.5, friction=0.3, damping=0.3,
+                             skin=2e-4)
+    dt = engine.critical_dt(base, p)
+    generate.consolidate(base, p, 1e5, dt, 5.0, 0.05, 1e-4)
+    rate = 0.1 / (40 * dt)
+    ctrl = engine.rate_control(1, l_ctrl=[[0.0, rate, 0.0], [0.0, 0.0, 0.0],
+                                          [0.0, 0.0, 0.0]], servo={2: -1e5},
+                               max_rate=0.1 * rate)
+    cpu, gpu = base.copy(), base.copy()
+    engine.advance(cpu, 40, dt, p, ctrl)
+    engine.advance(gpu, 40, dt, p, ctrl, device="cuda")
+    out = compare(cpu, gpu)
+    out.update({name: rel(getattr(cpu, name), getattr(gpu, name))
+                for name in ("bs", "bv", "bw", "bq", "bl")})
+    out["same_images"] = bool(np.array_equal(cpu.image, gpu.image))
+    out["no_inner_pairs"] = all(
+        bool(np.all(b.body[0, b.nbr_j[0, i, :b.nbr_count[0, i]]] != b.body[0, i]))
+        for b in (cpu, gpu) for i in range(b.n_particles))
+    out["rebuilt"] = [bool(not np.array_equal(base.h_ref[0], x.h_ref[0])) for x in (cpu, gpu)]
+    return out
 
 
 if __name__ == "__main__":

@@ -218,24 +218,6 @@ def test_bad_clump_tables_name_the_key(table, match):
         RVEParams(clump=table)
 
 
-def test_clumped_rves_are_refused_on_the_gpu_only():
-    """A 'dem' material whose [rve] has clumps runs on the CPU; with solver.device =
-    'cuda' it is refused before anything runs (the CUDA kernel has no rigid-body step)."""
-    from pathlib import Path
-
-    from grainscale.config.base import ConfigError
-    from grainscale.config.case import check_case, load_case
-    from grainscale.config.rve import ClumpShape
-
-    root = Path(__file__).resolve().parents[2]
-    case = load_case(root / "examples" / "column_collapse" / "quick.toml")
-    case.rve.clump = ClumpShape(template="tetrahedral")
-    check_case(case)
-    case.solver.device = "cuda"
-    with pytest.raises(ConfigError, match=r"solver.device = 'cuda' with \[rve.clump\]"):
-        check_case(case)
-
-
 @pytest.mark.parametrize("k,m", [(0, 2), (2, 3)])
 def test_a_clumped_cell_taken_m_times_places_every_member_exactly(k, m):
     """retile.multiply_cell of a clumped RVE: m copies of every body, each member given

@@ -709,11 +709,6 @@ def check_case(case: Case) -> None:
         if m.type == "dem" and case.rve is None:
             raise ConfigError(f"materials.{name}.type = 'dem' needs an [rve] table for the "
                               "contact parameters of its packings")
-        if m.type == "dem" and case.rve.clump is not None and case.solver.device == "cuda":
-            raise ConfigError(f"solver.device = 'cuda' with [rve.clump] (template = "
-                              f"{case.rve.clump.template!r}, material {name!r}): clumped "
-                              "RVEs run on the CPU only (the CUDA kernel has no rigid-body "
-                              "step yet); valid: solver.device = 'cpu', or no [rve.clump]")
         if m.type == "dem" and m.density is not None:
             raise ConfigError(f"materials.{name}.density = {m.density}: a 'dem' material's "
                               "density is that of its packings; remove the key")

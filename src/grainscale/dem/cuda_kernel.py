@@ -53,6 +53,12 @@ Guarantees.
   round-off (chaotic grain collisions), so over many steps RVEs agree statistically, not
   pointwise. Status codes, step counts and contact counts agree exactly as long as no
   contact sits within round-off of touching.
+Clumps (`_make_kernel(..., clumped=True)`, the arguments CLUMP_ARGS and the bodies'
+member lists): after a build the pairs inside a body are dropped and the images fixed,
+the stress uses the branch between the bodies' centres and their kinetic stress, and
+step 5 is cuda_rigid.advance (bodies, then members placed) instead of the spheres'
+integration; the unbalanced ratio and kinetic energy are per body (kernel.py's clumps).
+
 tests/dem/test_cuda_kernel.py runs it on numba's simulator (NUMBA_ENABLE_CUDASIM=1)
 and, where one is usable, on a GPU; measured on an H100 in docs/performance.md.
 """
@@ -65,6 +71,7 @@ import numpy as np
 from numba import config as numba_config
 from numba import cuda, float64
 
+from grainscale.dem import cuda_rigid
 from grainscale.dem.kernel import SERVO_EVERY
 from grainscale.dem.neighbours import Status
 from grainscale.linalg3 import det3, inv3
@@ -329,13 +336,16 @@ def _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res):
 @cuda.jit(device=True)
 def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r, eta_r, hz,
                   h, s, v, w, radius, mass, Ls, nbr_j, nbr_shift, nbr_count, ft, force, torque,
-                  x, tab, ent, rev, revc, red, res, homogenise, commit, full_moduli):
+                  x, tab, ent, rev, revc, red, res, homogenise, commit, full_moduli,
+                  clumped, off, bv, bm):
     """Contact forces and torques of RVE r (kernel.contact_pass, same law and arithmetic
     per contact, the history written only if `commit`); collective. Leaves in res: [0]
     contacts, [1] sum f_n [N] and, if `homogenise`, [2..10] sum d (x) F - sum m v (x) v
     (row-major), [11..16] the affine moduli sums c00, c11, c22, c01, c02, c12 (kt's
     part only with `full_moduli`; neither divided by V yet) and [17] the largest overlap
-    delta/R* (Hertz-Mindlin, hz = 2 E* > 0; else 0)."""
+    delta/R* (Hertz-Mindlin, hz = 2 E* > 0; else 0). Clumped (members of bodies): the
+    branch between the bodies' centres, d - off_j + off_i, in the stress and moduli, and
+    the bodies' kinetic stress (kernel.contact_pass)."""
     n = s.shape[1]
     cap = nbr_j.shape[2]
     hw = ft.shape[3]
@@ -502,7 +512,31 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r
             ent[g, i, k, 5] = tj2
             ncontact += 1.0
             fsum += abs(fn)  # as kernel.py: the mean normal force magnitude
-            if homogenise:
+            if homogenise and clumped:  # branch between the bodies' centres
+                e0 = d0 - off[r, j, 0] + off[r, i, 0]
+                e1 = d1 - off[r, j, 1] + off[r, i, 1]
+                e2 = d2 - off[r, j, 2] + off[r, i, 2]
+                sxx += e0 * F0
+                sxy += e0 * F1
+                sxz += e0 * F2
+                syx += e1 * F0
+                syy += e1 * F1
+                syz += e1 * F2
+                szx += e2 * F0
+                szy += e2 * F1
+                szz += e2 * F2
+                q0 = e0 * n0
+                q1 = e1 * n1
+                q2 = e2 * n2
+                kq = kt_mod * kn
+                fa = geo * (abs(fn) + math.sqrt(f0 * f0 + f1 * f1 + f2 * f2))
+                c00 += kn * q0 * q0 + kq * (e0 * e0 - q0 * q0) + abs(q0) * fa
+                c11 += kn * q1 * q1 + kq * (e1 * e1 - q1 * q1) + abs(q1) * fa
+                c22 += kn * q2 * q2 + kq * (e2 * e2 - q2 * q2) + abs(q2) * fa
+                c01 += (kn - kq) * q0 * q1
+                c02 += (kn - kq) * q0 * q2
+                c12 += (kn - kq) * q1 * q2
+            elif homogenise:
                 sxx += d0 * F0
                 sxy += d0 * F1
                 sxz += d0 * F2
@@ -529,7 +563,22 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r
         torque[g, i, 0] = ti0
         torque[g, i, 1] = ti1
         torque[g, i, 2] = ti2
-    if homogenise:  # kinetic stress of the thread's particles
+    if homogenise and clumped:  # kinetic stress of the thread's bodies
+        for b in range(tid, bm.shape[1], nthr):
+            mi = bm[r, b]
+            u0 = bv[r, b, 0]
+            u1 = bv[r, b, 1]
+            u2 = bv[r, b, 2]
+            sxx -= mi * u0 * u0
+            sxy -= mi * u0 * u1
+            sxz -= mi * u0 * u2
+            syx -= mi * u1 * u0
+            syy -= mi * u1 * u1
+            syz -= mi * u1 * u2
+            szx -= mi * u2 * u0
+            szy -= mi * u2 * u1
+            szz -= mi * u2 * u2
+    elif homogenise:  # kinetic stress of the thread's particles
         for i in range(tid, n, nthr):
             mi = mass[r, i]
             u0 = v[r, i, 0]
@@ -652,10 +701,11 @@ def _cell_control(r, dt, h, L, stress_servo, stiffness, e_step, l_mean, hdot_fix
 @cuda.jit(device=True)
 def _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref, h_ref,
            wrapv, x, old_j, old_code, ent, rev, revc, skin, cutoff, need_rebuild, out, red,
-           res, rev_ok):
+           res, rev_ok, clumped, hinv, body, rho, image, off, bs, bq, rmat):
     """The lists a contact pass of RVE r needs (collective): the neighbour list rebuilt if
-    the last check flagged it, the reverse list made if stale. Returns (status code,
-    rev_ok); on OVERFLOW out[r, 3] holds the row capacity to ask for."""
+    the last check flagged it (clumped: then cuda_rigid.after_build, hinv receiving the
+    cell's inverse), the reverse list made if stale. Returns (status code, rev_ok); on
+    OVERFLOW out[r, 3] holds the row capacity to ask for."""
     if need_rebuild[r] != 0:
         code, needed = _build(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft,
                               s_ref, h_ref, wrapv, x, old_j, old_code, ent, skin, cutoff,
@@ -668,6 +718,12 @@ def _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift, nbr_count, ft, s_ref
         cuda.syncthreads()  # need_rebuild read by all before thread 0 clears it
         if tid == 0:
             need_rebuild[r] = 0
+            if clumped:
+                _inv3(h[r], hinv)
+        if clumped:
+            cuda.syncthreads()
+            cuda_rigid.after_build(r, g, tid, nthr, hinv, s, body, rho, image, off, bs, bq,
+                                   nbr_j, nbr_shift, nbr_count, ft, rmat)
     if not rev_ok:
         rneed = _reverse(r, g, tid, nthr, nbr_j, nbr_count, rev, revc, red, res)
         if rneed > rev.shape[2]:  # rev holds 2 K: ask for K >= rneed / 2
@@ -771,9 +827,11 @@ def _residuals(r, g, tid, nthr, force, v, w, mass, inertia, red):
     red[2, tid] = ekin
 
 
-def _make_kernel(nthr: int, max_registers: int | None = None):
+def _make_kernel(nthr: int, max_registers: int | None = None, clumped: bool = False):
     """The batch kernel for blocks of `nthr` threads (shared-array sizes are constants),
-    at most `max_registers` registers per thread if given (more blocks per SM, spills)."""
+    at most `max_registers` registers per thread if given (more blocks per SM, spills);
+    `clumped`: the spheres are members of rigid clumps (cuda_rigid.py steps the bodies;
+    a constant of the kernel, so the spheres' variant holds no clump code)."""
     plain = max_registers is None or numba_config.ENABLE_CUDASIM  # the simulator takes none
     jit = cuda.jit if plain else cuda.jit(max_registers=max_registers)
 
@@ -784,7 +842,8 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                        stress_servo, stiffness, step_count, nbr_j, nbr_shift, nbr_count, ft,
                        s_ref, h_ref, need_rebuild, e_step, l_mean, hdot_fixed, l_ctrl,
                        servo_mask, servo_target, max_rate, status, out, ent, rev, revc, old_j,
-                       old_code, force, torque, x, wrapv):
+                       old_code, force, torque, x, wrapv, body, rho, image, off, bs, bv, bw,
+                       bq, bl, bm, bj, first, members, bforce, btorque, rmat):
         tid = cuda.threadIdx.x
         g = cuda.blockIdx.x
         red = cuda.shared.array((NRED, nthr), float64)
@@ -814,12 +873,15 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
             ncontact = 0.0
             fsum = 0.0
             rev_ok = False
+            if clumped:
+                cuda_rigid.orient(r, g, tid, nthr, body, rho, bq, off, rmat)
             for _step in range(nst):
                 # 1. neighbour list, if the last step's check asked for it
                 code, rev_ok = _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
                                       nbr_count, ft, s_ref, h_ref, wrapv, x, old_j, old_code,
                                       ent, rev, revc, skin, cutoff, need_rebuild, out, red,
-                                      res, rev_ok)
+                                      res, rev_ok, clumped, hinv, body, rho, image, off, bs,
+                                      bq, rmat)
                 if code != OK:
                     break
                 sample = servo_on and step_count[r] % SERVO_EVERY == 0
@@ -833,7 +895,7 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                 _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r,
                               eta_r, hz, h, s, v, w, radius, mass, Ls, nbr_j, nbr_shift,
                               nbr_count, ft, force, torque, x, tab, ent, rev, revc, red, res,
-                              sample, True, False)
+                              sample, True, False, clumped, off, bv, bm)
                 ncontact = res[0]
                 fsum = res[1]
                 if tid == 0:
@@ -847,8 +909,14 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                     _inv3(h[r], hinv)
                 cuda.syncthreads()
                 # 6. integration
-                _integrate(r, g, tid, nthr, dt, damping, v, w, s, s_ref, rot, force, torque,
-                           mass, inertia, Ls, hinv, red)
+                if clumped:
+                    red[0, tid] = cuda_rigid.advance(
+                        r, g, tid, nthr, dt, damping, Ls, hinv, s, v, w, rot, s_ref, off,
+                        force, torque, body, rho, image, bs, bv, bw, bq, bl, bm, bj, first,
+                        members, bforce, btorque, rmat)
+                else:
+                    _integrate(r, g, tid, nthr, dt, damping, v, w, s, s_ref, rot, force,
+                               torque, mass, inertia, Ls, hinv, red)
                 _max_row(red, res, 0, tid)
                 umax2 = res[0]
                 # 7. list check (thread 0), as kernel.advance_rve
@@ -880,7 +948,8 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                 code, rev_ok = _lists(r, g, tid, nthr, h, s, radius, nbr_j, nbr_shift,
                                       nbr_count, ft, s_ref, h_ref, wrapv, x, old_j, old_code,
                                       ent, rev, revc, skin, cutoff, need_rebuild, out, red,
-                                      res, rev_ok)
+                                      res, rev_ok, clumped, hinv, body, rho, image, off, bs,
+                                      bq, rmat)
                 if code == OK:
                     if tid == 0:  # the last step's L, and the image table of the new cell
                         _end_frame(r, h, L, Ls, tab)
@@ -888,17 +957,27 @@ def _make_kernel(nthr: int, max_registers: int | None = None):
                     _contact_pass(r, g, tid, nthr, 0.0, young, kt_ratio, friction, gamma,
                                   alpha_r, eta_r, hz, h, s, v, w, radius, mass, Ls, nbr_j,
                                   nbr_shift, nbr_count, ft, force, torque, x, tab, ent, rev,
-                                  revc, red, res, True, False, not servo_on)
+                                  revc, red, res, True, False, not servo_on, clumped, off, bv,
+                                  bm)
                     ncontact = res[0]
                     fsum = res[1]
                     if tid == 0:
                         _write_homogenised(r, h, res, stress, stiffness, not servo_on)
                         out[r, 5] = res[NSUM]
                     cuda.syncthreads()  # res read before the residuals overwrite it
-                    _residuals(r, g, tid, nthr, force, v, w, mass, inertia, red)
+                    grains = n
+                    if clumped:  # per body: a member's force is not a grain's
+                        cuda_rigid.reduce(r, g, tid, nthr, off, force, torque, first,
+                                          members, bforce, btorque)
+                        cuda_rigid.residuals(r, g, tid, nthr, bv, bw, bm, bj, bforce, rmat,
+                                             red)
+                        grains = bm.shape[1]
+                    else:
+                        _residuals(r, g, tid, nthr, force, v, w, mass, inertia, red)
                     _sum_rows(red, res, 3, tid)  # res[0] is then max-free: not read
                     if tid == 0:
-                        out[r, 1] = (res[1] / n) / (fsum / ncontact) if ncontact > 0 else 0.0
+                        out[r, 1] = (res[1] / grains) / (fsum / ncontact) if ncontact > 0 \
+                            else 0.0
                         out[r, 2] = res[2]
                     cuda.syncthreads()
             if tid == 0:
@@ -960,8 +1039,25 @@ CONTROL_ARGS = ("e_step", "l_mean", "hdot_fixed", "l_ctrl", "servo_mask", "servo
                 "max_rate")
 
 
+# the clump arrays the clumped kernel reads and writes (kernel.Clumps' fields), and the
+# members of each body (cuda_rigid.member_lists)
+CLUMP_ARGS = ("body", "rho", "image", "off", "bs", "bv", "bw", "bq", "bl", "bm", "bj")
+CLUMP_READ_ONLY = ("body", "rho", "bm", "bj")
+
+
+def _no_clumps() -> tuple:
+    """Stand-ins for the clump arguments of the spheres' kernel, which never reads them
+    (one element each: no zero-size device arrays)."""
+    shapes = ((1, 1), (1, 1, 3), (1, 1, 3), (1, 1, 3), (1, 1, 3), (1, 1, 3), (1, 1, 3),
+              (1, 1, 4), (1, 1, 3), (1, 1), (1, 1, 3), (1, 2), (1, 1), (1, 1, 3), (1, 1, 3),
+              (1, 1, 3, 3))
+    types = (np.int32,) + (np.float64,) * 10 + (np.int32, np.int32) + (np.float64,) * 3
+    return tuple(cuda.device_array(sh, t) for sh, t in zip(shapes, types, strict=True))
+
+
 def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_out,
-           threads: int | None = None, max_blocks: int | None = None) -> tuple | None:
+           threads: int | None = None, max_blocks: int | None = None,
+           dcl: tuple | None = None) -> tuple | None:
     """Run the batch kernel on device arrays: d_nsteps (R,) int64, dev the state arrays
     in STATE_ARGS order, dctl the controls in CONTROL_ARGS order, d_status (R,) int64,
     d_out (R,6). Nothing crosses to the host (dem/device_batch.py keeps the state there).
@@ -974,10 +1070,14 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
     MAX_BLOCKS, read at each call) bounds the blocks in flight, and so the scratch: per
     block 6 doubles per list slot (entry forces and torques), 4 ints per slot (old rows
     during a build, the reverse list) and 88 B per sphere (a step's forces, torques,
-    positions and wrap counts, the reverse-list counts)."""
+    positions and wrap counts, the reverse-list counts).
+
+    `dcl`: for clumped RVEs, their clump arrays on the device in CLUMP_ARGS order and
+    the bodies' member lists (first, members); the per-block body scratch is added here
+    (forces, torques, rotations: 120 B per body)."""
     threads = THREADS if threads is None else int(threads)
     max_blocks = MAX_BLOCKS if max_blocks is None else int(max_blocks)
-    key = (threads, MAX_REGISTERS)
+    key = (threads, MAX_REGISTERS, dcl is not None)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     nrve, n = dev[1].shape[:2]  # s
@@ -986,16 +1086,23 @@ def launch(d_nsteps, law, dev, dctl, dt: float, servo_gain: float, d_status, d_o
     cap = dev[STATE_ARGS.index("nbr_j")].shape[2]
     blocks = max(1, min(nrve, max_blocks))
     scratch = _scratch(blocks, n, cap)
+    if dcl is None:
+        clumps = _no_clumps()
+    else:
+        nb = dcl[CLUMP_ARGS.index("bm")].shape[1]
+        clumps = (*dcl, cuda.device_array((blocks, nb, 3), np.float64),
+                  cuda.device_array((blocks, nb, 3), np.float64),
+                  cuda.device_array((blocks, nb, 3, 3), np.float64))
     _KERNELS[key][blocks, threads](
         d_nsteps, float(law.young), float(law.kt_ratio), float(law.friction),
         float(law.gamma), float(law.damping), float(law.skin), float(law.rolling_stiffness),
         float(law.rolling_friction), float(law.hertz_kn), float(dt), float(servo_gain),
-        *dev, *dctl, d_status, d_out, *scratch)
+        *dev, *dctl, d_status, d_out, *scratch, *clumps)
     return scratch
 
 
 def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
-                  max_blocks: int | None = None) -> None:
+                  max_blocks: int | None = None, cl=None) -> None:
     """Advance every RVE r by nsteps[r] steps on the GPU: kernel.advance_batch's
     arguments (host arrays: RveState st, ContactLaw law, Controls ctl with the RVE index
     first, status (R,), out (R,6)), results written back into them.
@@ -1005,7 +1112,8 @@ def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
     `st.force` and `st.torque` (the CPU's scratch, read by nothing after a call) get the
     last step's values for the RVEs that stepped where the batch fits the blocks in
     flight (R <= max_blocks, default MAX_BLOCKS), as tests compare them with the CPU's;
-    otherwise they keep what they held."""
+    otherwise they keep what they held. `cl`: the batch's kernel.Clumps (host arrays)
+    when its spheres are clump members, copied down and back with the state."""
     if st.s.shape[0] == 0:
         return
     max_blocks = MAX_BLOCKS if max_blocks is None else int(max_blocks)
@@ -1017,11 +1125,20 @@ def advance_batch(nsteps, law, st, ctl, status, out, threads: int | None = None,
     dctl = [cuda.to_device(np.ascontiguousarray(getattr(ctl, name))) for name in CONTROL_ARGS]
     d_status = cuda.to_device(status)
     d_out = cuda.to_device(out)
+    dcl = None
+    if cl is not None:
+        lists = cuda_rigid.member_lists(cl.body, cl.bm.shape[1])
+        dcl = tuple(cuda.to_device(np.ascontiguousarray(getattr(cl, name)))
+                    for name in CLUMP_ARGS) + tuple(cuda.to_device(a) for a in lists)
     scratch = launch(cuda.to_device(np.ascontiguousarray(nsteps, np.int64)), law, dev,
-                     dctl, ctl.dt, ctl.servo_gain, d_status, d_out, threads, max_blocks)
+                     dctl, ctl.dt, ctl.servo_gain, d_status, d_out, threads, max_blocks, dcl)
     for name, a, d in zip(STATE_ARGS, host, dev, strict=True):
         if name not in READ_ONLY:
             d.copy_to_host(a)
+    if cl is not None:
+        for name, d in zip(CLUMP_ARGS, dcl, strict=False):
+            if name not in CLUMP_READ_ONLY:
+                d.copy_to_host(getattr(cl, name))
     d_status.copy_to_host(status)
     d_out.copy_to_host(out)
     if st.s.shape[0] <= max_blocks:

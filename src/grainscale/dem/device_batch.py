@@ -27,6 +27,11 @@ through `take` and `put` (gathered and scattered on the device, so only the rows
 for cross), `remove` drops rows on the device, `grow` widens the neighbour lists there,
 and the constants that per-RVE quantities need (mean radius, grain mass, solid volume)
 are kept per RVE.
+
+A clumped batch keeps its clump arrays (cuda_kernel.CLUMP_ARGS and the bodies' volumes)
+and the members of each body (cuda_rigid.member_lists) on the device too, moved row by
+row with the state; in a lean batch they are placeholders on the host, as the
+per-sphere arrays.
 """
 
 from __future__ import annotations
@@ -34,8 +39,9 @@ from __future__ import annotations
 import numpy as np
 from numba import cuda, float64
 
-from grainscale.dem import cuda_kernel
+from grainscale.dem import cuda_kernel, cuda_rigid
 from grainscale.dem.state import (
+    CLUMP_FIELDS,
     SPHERE_AXIS_FIELDS,
     RVEBatch,
     allocate,
@@ -47,6 +53,14 @@ from grainscale.dem.state import (
 
 STATE_ARGS = cuda_kernel.STATE_ARGS
 CONTROL_ARGS = cuda_kernel.CONTROL_ARGS
+# a clumped batch's further device arrays: its clump arrays (cuda_kernel.CLUMP_ARGS) and
+# the members of each body (cuda_rigid.member_lists), row by row as the state
+CLUMP_ARGS = cuda_kernel.CLUMP_ARGS
+LISTS = ("first", "members")
+KEPT = CLUMP_ARGS + ("bvol",)  # and the bodies' volumes, which the kernel does not read
+# held on the device only in a lean batch, as the per-sphere arrays (the bodies' arrays
+# are per body: tens of kB an RVE)
+DEVICE_ONLY = SPHERE_AXIS_FIELDS + CLUMP_FIELDS + ("off",)
 UP_EACH_CALL = ("h", "stress", "stiffness")  # host copies kept current by every call
 ALWAYS_SENT = ("e_step", "l_mean")  # the controls of an increment; others when non-zero
 _REDUCE = 128  # threads of the per-RVE reductions below
@@ -104,7 +118,7 @@ def lean_copy(full: RVEBatch, rows: np.ndarray) -> RVEBatch:
     out = {}
     for name in RVEBatch.__dataclass_fields__:
         a = getattr(full, name)
-        if name in SPHERE_AXIS_FIELDS:
+        if name in DEVICE_ONLY:
             out[name] = _placeholder((len(rows), *a.shape[1:]), a.dtype)
         else:
             out[name] = a[rows].copy()
@@ -158,14 +172,26 @@ def _row_means(a, out):
         out[r] = total / n
 
 
+def _sources(b: RVEBatch) -> dict[str, np.ndarray]:
+    """The host arrays a batch keeps on the device, by name: STATE_ARGS, and for clumps
+    KEPT and the member lists (made here from `body`)."""
+    out = {name: getattr(b, name) for name in STATE_ARGS}
+    if b.clumped:
+        out.update({name: getattr(b, name) for name in KEPT})
+        out.update(zip(LISTS, cuda_rigid.member_lists(b.body, b.bm.shape[1]), strict=True))
+    return out
+
+
 class DeviceBatch:
     """The state of `host` (an RVEBatch) on the current GPU, kept there between calls."""
 
     def __init__(self, host: RVEBatch, arrays: dict | None = None,
                  constants: dict | None = None):
-        """Upload `host` (a full batch), or adopt device `arrays` (STATE_ARGS names) of
-        which `host` is the lean mirror, with its per-RVE `constants` (from_library)."""
+        """Upload `host` (a full batch), or adopt device `arrays` (`names`) of which
+        `host` is the lean mirror, with its per-RVE `constants` (from_library)."""
         self.host = host
+        # the device arrays: the state, and a clumped batch's clumps and member lists
+        self.names = STATE_ARGS + ((*KEPT, *LISTS) if host.clumped else ())
         self.moved = 0  # bytes copied between host and device, both ways
         self.arrays: dict[str, object] = {}
         self._zeros: dict[tuple, object] = {}  # device zeros standing for unsent controls
@@ -193,9 +219,9 @@ class DeviceBatch:
         d_from = cuda.to_device(assignment)
         d_to = cuda.to_device(np.arange(r, dtype=np.int64))
         arrays = {}
-        for name in STATE_ARGS:
-            src = getattr(stack, name)
-            if name not in SPHERE_AXIS_FIELDS:
+        sources = _sources(stack)
+        for name, src in sources.items():
+            if name not in DEVICE_ONLY and name not in LISTS:
                 arrays[name] = cuda.to_device(getattr(host, name))
                 continue
             arrays[name] = cuda.device_array((r, *src.shape[1:]), src.dtype)
@@ -203,8 +229,8 @@ class DeviceBatch:
                 _copy_rows[r, _COPY](_rows2d(cuda.to_device(src)), d_from,
                                      _rows2d(arrays[name]), d_to)
         dev = cls(host, arrays, {key: v[assignment] for key, v in rve_constants(stack).items()})
-        dev.moved = sum(getattr(stack, n).nbytes for n in STATE_ARGS) + sum(
-            getattr(host, n).nbytes for n in STATE_ARGS if n not in SPHERE_AXIS_FIELDS)
+        dev.moved = sum(a.nbytes for a in sources.values()) + sum(
+            getattr(host, n).nbytes for n in sources if n not in DEVICE_ONLY + LISTS)
         return dev
 
     @property
@@ -228,17 +254,17 @@ class DeviceBatch:
         if self.lean:
             raise ValueError("a batch built on the device has no host state to push; "
                              "write rows with put")
+        sources = _sources(self.host)
         if rows is None:
-            for name in STATE_ARGS:
-                a = getattr(self.host, name)
+            for name, a in sources.items():
                 if not a.flags.c_contiguous:
                     raise ValueError(f"RVE state array {name!r} is not C-contiguous")
                 self.arrays[name] = cuda.to_device(a)
                 self.moved += a.nbytes
             return
         for r in np.atleast_1d(rows):  # slices r:r+1 (an index of a 1-D array is a value)
-            for name in STATE_ARGS:
-                a = getattr(self.host, name)[r:r + 1]
+            for name, a in sources.items():
+                a = a[r:r + 1]
                 self.arrays[name][r:r + 1].copy_to_device(np.ascontiguousarray(a))
                 self.moved += a.nbytes
 
@@ -249,7 +275,8 @@ class DeviceBatch:
         if self.lean:
             raise ValueError("a batch built on the device keeps its state there; read "
                              "rows with take")
-        names = [n for n in STATE_ARGS if n not in cuda_kernel.READ_ONLY]
+        names = [n for n in self.names if n not in cuda_kernel.READ_ONLY
+                 and n not in cuda_kernel.CLUMP_READ_ONLY and n not in LISTS + ("bvol",)]
         if rows is None:
             for name in names:
                 self.arrays[name].copy_to_host(getattr(self.host, name))
@@ -268,19 +295,22 @@ class DeviceBatch:
         the host, where they are current)."""
         rows = np.atleast_1d(np.asarray(rows, np.int64))
         k = len(rows)
-        out = allocate(k, self.n_particles, self.host.capacity, self.host.ft.shape[3])
+        out = allocate(k, self.n_particles, self.host.capacity, self.host.ft.shape[3],
+                       self.host.bm.shape[1])
         if k == 0:
             return out
         d_rows = cuda.to_device(rows)
         d_at = cuda.to_device(np.arange(k, dtype=np.int64))
-        for name in STATE_ARGS:
+        for name in self.names:
+            if name in LISTS:  # made from `body` again wherever needed
+                continue
             src = self.arrays[name]
             tmp = cuda.device_array((k, *src.shape[1:]), src.dtype)
             _copy_rows[k, _COPY](_rows2d(src), d_rows, _rows2d(tmp), d_at)
             tmp.copy_to_host(getattr(out, name))
             self.moved += tmp.nbytes
         for name in RVEBatch.__dataclass_fields__:  # per RVE, kept on the host only
-            if name not in STATE_ARGS and name not in SPHERE_AXIS_FIELDS:
+            if name not in self.names and name not in DEVICE_ONLY:
                 getattr(out, name)[:] = getattr(self.host, name)[rows]
         return out
 
@@ -294,13 +324,13 @@ class DeviceBatch:
             return
         d_rows = cuda.to_device(rows)
         d_at = cuda.to_device(np.arange(len(rows), dtype=np.int64))
-        for name in STATE_ARGS:
-            a = np.ascontiguousarray(getattr(batch, name))
+        for name, a in _sources(batch).items():
+            a = np.ascontiguousarray(a)
             _copy_rows[len(rows), _COPY](_rows2d(cuda.to_device(a)), d_at,
                                          _rows2d(self.arrays[name]), d_rows)
             self.moved += a.nbytes
         for name in RVEBatch.__dataclass_fields__:
-            if not (self.lean and name in SPHERE_AXIS_FIELDS):
+            if not (self.lean and name in DEVICE_ONLY):
                 getattr(self.host, name)[rows] = getattr(batch, name)
         for key, v in rve_constants(batch).items():
             self.constants[key][rows] = v
@@ -319,7 +349,7 @@ class DeviceBatch:
         if holes.size:
             d_from = cuda.to_device(movers)
             d_to = cuda.to_device(holes)
-            for name in STATE_ARGS:
+            for name in self.names:
                 a = _rows2d(self.arrays[name])
                 _copy_rows[holes.size, _COPY](a, d_from, a, d_to)
         self.arrays = {name: a[:keep] for name, a in self.arrays.items()}
@@ -366,7 +396,7 @@ class DeviceBatch:
         the device to the host; returns it: the host batch's array, or, for a per-sphere
         array of a lean batch, a new one."""
         d = self.arrays[name]
-        if self.lean and name in SPHERE_AXIS_FIELDS:
+        if self.lean and name in DEVICE_ONLY:
             a = d.copy_to_host()
         else:
             a = getattr(self.host, name)
@@ -401,8 +431,10 @@ class DeviceBatch:
         d_status = cuda.to_device(status)  # out keeps what the kernel does not write
         d_out = cuda.to_device(out)
         self.moved += nsteps.nbytes + status.nbytes + out.nbytes
+        dcl = (tuple(self.arrays[n] for n in (*CLUMP_ARGS, *LISTS)) if self.host.clumped
+               else None)
         cuda_kernel.launch(d_nsteps, law, [self.arrays[n] for n in STATE_ARGS], dctl,
-                           ctl.dt, ctl.servo_gain, d_status, d_out)
+                           ctl.dt, ctl.servo_gain, d_status, d_out, dcl=dcl)
         d_status.copy_to_host(status)
         d_out.copy_to_host(out)
         self.moved += status.nbytes + out.nbytes

@@ -289,9 +289,6 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
             raise ValueError(f"the device batch keeps {host.ft.shape[3]} history components "
                              f"a contact, this contact law {params.history}")
         with_history(host, params.history)  # zero moments, or refused if it holds some
-    if not resident and host.clumped and device != "cpu":
-        raise DeviceError(f"solver.device = {device!r}: clumps run on the CPU only; "
-                          "valid: 'cpu'")
     clumps = clump_arrays(host) if not resident else None
     if resident:
         step_batch = None
@@ -325,7 +322,7 @@ def advance(batch, nsteps, dt: float, params: ContactParams,
         if resident:
             batch.step(call, law, ctl, status, out)
         elif clumps is not None:
-            step_batch(call, law, rve_arrays(batch), ctl, status, out, clumps)
+            step_batch(call, law, rve_arrays(batch), ctl, status, out, cl=clumps)
         else:
             step_batch(call, law, rve_arrays(batch), ctl, status, out)
         done = out[:, 4].astype(np.int64)
