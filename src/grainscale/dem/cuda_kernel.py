@@ -72,6 +72,7 @@ from numba import config as numba_config
 from numba import cuda, float64
 
 from grainscale.dem import cuda_rigid
+from grainscale.dem.cuda_rigid import signed as _signed
 from grainscale.dem.kernel import SERVO_EVERY
 from grainscale.dem.neighbours import Status
 from grainscale.linalg3 import det3, inv3
@@ -109,18 +110,6 @@ def select_gpu(node_rank: int) -> int:
 
 
 # --------------------------------------------------------------------- device helpers
-@cuda.jit(device=True)
-def _signed(f, u):
-    """|f| sign(u), 0 where u = 0: kernel.py's copysign(f, u) _sgn(u), damping acting
-    only on moving degrees of freedom (no copysign: libdevice's fails NVVM's verifier
-    with numba 0.68's CUDA target)."""
-    if u > 0.0:
-        return abs(f)
-    if u < 0.0:
-        return -abs(f)
-    return 0.0
-
-
 @cuda.jit(device=True)
 def _max(a, b):
     """max(a, b) as Python's builtin (a unless b > a). The builtin's varargs overload

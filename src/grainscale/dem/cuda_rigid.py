@@ -34,8 +34,10 @@ def member_lists(body: np.ndarray, n_bodies: int) -> tuple[np.ndarray, np.ndarra
 
 
 @cuda.jit(device=True)
-def _signed(f, u):
-    """|f| sign(u), 0 where u = 0 (cuda_kernel._signed: rigid.py's copysign(f, u) _sgn(u))."""
+def signed(f, u):
+    """|f| sign(u), 0 where u = 0: kernel.py's and rigid.py's copysign(f, u) _sgn(u),
+    damping acting only on moving degrees of freedom (no copysign: libdevice's fails
+    NVVM's verifier with numba 0.68's CUDA target). cuda_kernel.py uses it too."""
     if u > 0.0:
         return abs(f)
     if u < 0.0:
@@ -184,9 +186,9 @@ def advance(r, g, tid, nthr, dt, damping, Ls, hinv, s, v, w, rot, s_ref, off, fo
         lv0 = dt * (Ls[0, 0] * u0 + Ls[0, 1] * u1 + Ls[0, 2] * u2)
         lv1 = dt * (Ls[1, 0] * u0 + Ls[1, 1] * u1 + Ls[1, 2] * u2)
         lv2 = dt * (Ls[2, 0] * u0 + Ls[2, 1] * u1 + Ls[2, 2] * u2)
-        u0 += im * (f0 - damping * _signed(f0, u0)) - lv0
-        u1 += im * (f1 - damping * _signed(f1, u1)) - lv1
-        u2 += im * (f2 - damping * _signed(f2, u2)) - lv2
+        u0 += im * (f0 - damping * signed(f0, u0)) - lv0
+        u1 += im * (f1 - damping * signed(f1, u1)) - lv1
+        u2 += im * (f2 - damping * signed(f2, u2)) - lv2
         bv[r, b, 0] = u0
         bv[r, b, 1] = u1
         bv[r, b, 2] = u2
@@ -199,9 +201,9 @@ def advance(r, g, tid, nthr, dt, damping, Ls, hinv, s, v, w, rot, s_ref, off, fo
         a0 = bw[r, b, 0]
         a1 = bw[r, b, 1]
         a2 = bw[r, b, 2]
-        t0 = btorque[g, b, 0] - damping * _signed(btorque[g, b, 0], a0)
-        t1 = btorque[g, b, 1] - damping * _signed(btorque[g, b, 1], a1)
-        t2 = btorque[g, b, 2] - damping * _signed(btorque[g, b, 2], a2)
+        t0 = btorque[g, b, 0] - damping * signed(btorque[g, b, 0], a0)
+        t1 = btorque[g, b, 1] - damping * signed(btorque[g, b, 1], a1)
+        t2 = btorque[g, b, 2] - damping * signed(btorque[g, b, 2], a2)
         _step(bq[r, b], bl[r, b], bj[r, b], t0, t1, t2, dt, omega, rmat[g, b], ln, half,
               new, W0, W1, W2)
         bw[r, b, 0] = omega[0]
