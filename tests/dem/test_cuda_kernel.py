@@ -438,7 +438,7 @@ def test_coupled_runs_agree_with_cpu(sim_long, name):
     else:  # released and moving
         assert res["last"]["t_over_tc"] > 0 and res["last"]["kinetic_energy"] > 0
     for column, diff in res.items():
-        if column not in ("rows", "last", "stepped"):
+        if column not in ("rows", "last", "stepped", "particles"):
             assert diff < RUN_RTOL, (column, diff)
 
 
