@@ -418,10 +418,14 @@ def longest_row(batches: list[RVEBatch]) -> int:
 
 
 def rve_constants(b: RVEBatch) -> dict[str, np.ndarray]:
-    """Per-RVE constants of a batch, (R,) each: mean grain radius [m], grain mass [kg]
-    and solid volume [m^3] (what per-RVE quantities need from the spheres)."""
-    grain_mass = b.bm.sum(axis=1) if b.clumped else b.mass.sum(axis=1)
-    return {"mean_radius": b.radius.mean(axis=1), "grain_mass": grain_mass,
+    """Per-RVE constants of a batch, (R,) each: mean grain radius [m] (a clump's: its
+    reach from its centre, body_lever, half its longest extent: the size that decides
+    when a cell is too thin for it), grain mass [kg] and solid volume [m^3] (what
+    per-RVE quantities need from the spheres)."""
+    if b.clumped:
+        return {"mean_radius": body_lever(b).mean(axis=1), "grain_mass": b.bm.sum(axis=1),
+                "solid_volume": b.solid_volume()}
+    return {"mean_radius": b.radius.mean(axis=1), "grain_mass": b.mass.sum(axis=1),
             "solid_volume": b.solid_volume()}
 
 
