@@ -72,6 +72,7 @@ from numba import config as numba_config
 from numba import cuda, float64
 
 from grainscale.dem import cuda_rigid
+from grainscale.dem.cuda_rigid import kick
 from grainscale.dem.cuda_rigid import signed as _signed
 from grainscale.dem.kernel import SERVO_EVERY
 from grainscale.dem.neighbours import Status
@@ -552,27 +553,14 @@ def _contact_pass(r, g, tid, nthr, dt, young, kt_ratio, friction, gamma, alpha_r
         torque[g, i, 0] = ti0
         torque[g, i, 1] = ti1
         torque[g, i, 2] = ti2
-    if homogenise and clumped:  # kinetic stress of the thread's bodies
-        for b in range(tid, bm.shape[1], nthr):
-            mi = bm[r, b]
-            u0 = bv[r, b, 0]
-            u1 = bv[r, b, 1]
-            u2 = bv[r, b, 2]
-            sxx -= mi * u0 * u0
-            sxy -= mi * u0 * u1
-            sxz -= mi * u0 * u2
-            syx -= mi * u1 * u0
-            syy -= mi * u1 * u1
-            syz -= mi * u1 * u2
-            szx -= mi * u2 * u0
-            szy -= mi * u2 * u1
-            szz -= mi * u2 * u2
-    elif homogenise:  # kinetic stress of the thread's particles
-        for i in range(tid, n, nthr):
-            mi = mass[r, i]
-            u0 = v[r, i, 0]
-            u1 = v[r, i, 1]
-            u2 = v[r, i, 2]
+    if homogenise:  # kinetic stress of the thread's particles (clumps: bodies)
+        kin_m = bm if clumped else mass
+        kin_v = bv if clumped else v
+        for i in range(tid, kin_m.shape[1], nthr):
+            mi = kin_m[r, i]
+            u0 = kin_v[r, i, 0]
+            u1 = kin_v[r, i, 1]
+            u2 = kin_v[r, i, 2]
             sxx -= mi * u0 * u0
             sxy -= mi * u0 * u1
             sxz -= mi * u0 * u2
@@ -752,19 +740,8 @@ def _integrate(r, g, tid, nthr, dt, damping, v, w, s, s_ref, rot, force, torque,
     n = s.shape[1]
     umax2 = 0.0
     for i in range(tid, n, nthr):
-        im = dt / mass[r, i]
-        f0 = force[g, i, 0]
-        f1 = force[g, i, 1]
-        f2 = force[g, i, 2]
-        u0 = v[r, i, 0]
-        u1 = v[r, i, 1]
-        u2 = v[r, i, 2]
-        lv0 = dt * (Ls[0, 0] * u0 + Ls[0, 1] * u1 + Ls[0, 2] * u2)
-        lv1 = dt * (Ls[1, 0] * u0 + Ls[1, 1] * u1 + Ls[1, 2] * u2)
-        lv2 = dt * (Ls[2, 0] * u0 + Ls[2, 1] * u1 + Ls[2, 2] * u2)
-        u0 += im * (f0 - damping * _signed(f0, u0)) - lv0
-        u1 += im * (f1 - damping * _signed(f1, u1)) - lv1
-        u2 += im * (f2 - damping * _signed(f2, u2)) - lv2
+        u0, u1, u2 = kick(v[r, i, 0], v[r, i, 1], v[r, i, 2], force[g, i, 0],
+                          force[g, i, 1], force[g, i, 2], dt / mass[r, i], damping, Ls, dt)
         v[r, i, 0] = u0
         v[r, i, 1] = u1
         v[r, i, 2] = u2

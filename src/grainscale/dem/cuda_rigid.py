@@ -46,6 +46,21 @@ def signed(f, u):
 
 
 @cuda.jit(device=True)
+def kick(u0, u1, u2, f0, f1, f2, im, damping, L, dt):
+    """The velocity V' of a grain after one step (kernel._translate's arithmetic):
+    V' + im (F - damping |F| sign V') - dt L V', im = dt/m; Cundall's damping and the
+    SLLOD pseudo-force. The spheres' step (cuda_kernel._integrate) and the bodies'
+    (`advance`) both take it."""
+    lv0 = dt * (L[0, 0] * u0 + L[0, 1] * u1 + L[0, 2] * u2)
+    lv1 = dt * (L[1, 0] * u0 + L[1, 1] * u1 + L[1, 2] * u2)
+    lv2 = dt * (L[2, 0] * u0 + L[2, 1] * u1 + L[2, 2] * u2)
+    u0 += im * (f0 - damping * signed(f0, u0)) - lv0
+    u1 += im * (f1 - damping * signed(f1, u1)) - lv1
+    u2 += im * (f2 - damping * signed(f2, u2)) - lv2
+    return u0, u1, u2
+
+
+@cuda.jit(device=True)
 def _angular_velocity(q, L, J, rot, out):
     """quaternion.angular_velocity: out = R diag(1/J) R^T L, rot (3,3) left R(q)."""
     _matrix(q, rot)
@@ -176,19 +191,8 @@ def advance(r, g, tid, nthr, dt, damping, Ls, hinv, s, v, w, rot, s_ref, off, fo
     half = cuda.local.array(4, float64)
     new = cuda.local.array(4, float64)
     for b in range(tid, bm.shape[1], nthr):
-        im = dt / bm[r, b]
-        u0 = bv[r, b, 0]
-        u1 = bv[r, b, 1]
-        u2 = bv[r, b, 2]
-        f0 = bforce[g, b, 0]
-        f1 = bforce[g, b, 1]
-        f2 = bforce[g, b, 2]
-        lv0 = dt * (Ls[0, 0] * u0 + Ls[0, 1] * u1 + Ls[0, 2] * u2)
-        lv1 = dt * (Ls[1, 0] * u0 + Ls[1, 1] * u1 + Ls[1, 2] * u2)
-        lv2 = dt * (Ls[2, 0] * u0 + Ls[2, 1] * u1 + Ls[2, 2] * u2)
-        u0 += im * (f0 - damping * signed(f0, u0)) - lv0
-        u1 += im * (f1 - damping * signed(f1, u1)) - lv1
-        u2 += im * (f2 - damping * signed(f2, u2)) - lv2
+        u0, u1, u2 = kick(bv[r, b, 0], bv[r, b, 1], bv[r, b, 2], bforce[g, b, 0],
+                          bforce[g, b, 1], bforce[g, b, 2], dt / bm[r, b], damping, Ls, dt)
         bv[r, b, 0] = u0
         bv[r, b, 1] = u1
         bv[r, b, 2] = u2

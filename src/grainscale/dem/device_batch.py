@@ -61,6 +61,8 @@ KEPT = CLUMP_ARGS + ("bvol",)  # and the bodies' volumes, which the kernel does 
 # held on the device only in a lean batch, as the per-sphere arrays (the bodies' arrays
 # are per body: tens of kB an RVE)
 DEVICE_ONLY = SPHERE_AXIS_FIELDS + CLUMP_FIELDS + ("off",)
+# never changed on the device: not copied back by `pull`
+UNCHANGED = cuda_kernel.READ_ONLY + cuda_kernel.CLUMP_READ_ONLY + ("bvol",) + LISTS
 UP_EACH_CALL = ("h", "stress", "stiffness")  # host copies kept current by every call
 ALWAYS_SENT = ("e_step", "l_mean")  # the controls of an increment; others when non-zero
 _REDUCE = 128  # threads of the per-RVE reductions below
@@ -275,8 +277,7 @@ class DeviceBatch:
         if self.lean:
             raise ValueError("a batch built on the device keeps its state there; read "
                              "rows with take")
-        names = [n for n in self.names if n not in cuda_kernel.READ_ONLY
-                 and n not in cuda_kernel.CLUMP_READ_ONLY and n not in LISTS + ("bvol",)]
+        names = [n for n in self.names if n not in UNCHANGED]
         if rows is None:
             for name in names:
                 self.arrays[name].copy_to_host(getattr(self.host, name))

@@ -422,10 +422,8 @@ def rve_constants(b: RVEBatch) -> dict[str, np.ndarray]:
     reach from its centre, body_lever, half its longest extent: the size that decides
     when a cell is too thin for it), grain mass [kg] and solid volume [m^3] (what
     per-RVE quantities need from the spheres)."""
-    if b.clumped:
-        return {"mean_radius": body_lever(b).mean(axis=1), "grain_mass": b.bm.sum(axis=1),
-                "solid_volume": b.solid_volume()}
-    return {"mean_radius": b.radius.mean(axis=1), "grain_mass": b.mass.sum(axis=1),
+    size, mass = (body_lever(b), b.bm) if b.clumped else (b.radius, b.mass)
+    return {"mean_radius": size.mean(axis=1), "grain_mass": mass.sum(axis=1),
             "solid_volume": b.solid_volume()}
 
 
