@@ -227,7 +227,10 @@ def load_rows(s: MPMState, sources) -> bool:
         state = merge(mat_parts[i]) if merge else {
             k: np.concatenate([p[k] for p in mat_parts[i]]) for k in mat_parts[i][0]}
         order = np.argsort(np.concatenate(mat_ids[i]))
-        m.load_state({k: v[order] for k, v in state.items()})
+        if np.array_equal(order, np.arange(len(order))):  # in order: no copy of the state
+            m.load_state(state)
+        else:
+            m.load_state({k: v[order] for k, v in state.items()})
     return True
 
 

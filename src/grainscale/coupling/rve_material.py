@@ -714,7 +714,9 @@ class RVEMaterial:
         capacity = state.get("rve_capacity")  # absent in checkpoints before it
         for n, nb in sorted(set(zip(counts.tolist(), bodies.tolist(), strict=True))):
             rows = np.flatnonzero((counts == n) & (bodies == nb))
-            b = from_state_arrays(unpadded({k: v[rows] for k, v in arrays.items()}, n, nb))
+            every = len(rows) == self.n_points  # one group: no copy of the whole state
+            b = from_state_arrays(unpadded({k: v if every else v[rows]
+                                            for k, v in arrays.items()}, n, nb))
             if capacity is not None:  # the same capacity as saved: the run continues bitwise
                 grow_capacity(b, int(np.max(capacity[rows])))
             self.groups.append(b)
@@ -764,6 +766,8 @@ class RVEMaterial:
     def merge_states(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
         """One state from the states of several sets of points (checkpoint parts written
         by different ranks), in order; sphere counts and list capacities may differ."""
+        if len(parts) == 1:  # one rank wrote it: no copy (a resume's memory peak)
+            return parts[0]
         n = max(p["rve_s"].shape[1] for p in parts)
         k = max(p["rve_nbr_j"].shape[2] for p in parts)
         names = _state_names(parts[0])
