@@ -4,6 +4,7 @@
         [--max-deferred 20] [--cfl-offset 0] [--threads N] [--case quick.toml]
         [--velocity-update apic] [--particles N]
     python studies/column_collapse/sleeping.py compare RUN [RUN ...] [--after 3]
+    python studies/column_collapse/sleeping.py why RUN --out COPY [--steps 100]
 
 `run`: the case (default examples/column_collapse/quick.toml) with sleeping RVEs
 (materials.sand.update_tolerance, max_deferred_steps; --tolerance 0: every RVE every
@@ -16,13 +17,15 @@ studies/column_spread.py's measures at the last row (front, 99 % and 95 % of the
 H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
 share of RVEs stepped, over the run and after --after tau_c (from the history's
 cumulative cost columns; cost.json covers one invocation). The last line is one JSON
-object.
+object. `why`: what keeps RVEs of a finished run awake (the function's docstring), over
+--steps more MPM steps of a copy of it; one JSON object.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -101,6 +104,68 @@ def cost(run_dir: Path, after: float) -> dict:
     return out
 
 
+def why(args) -> None:
+    """`why`: a copy of a finished sleeping run (args.run) continued --steps MPM steps into
+    args.out, recording after each step, from the points' increments (s.dH) and DEM update
+    counters (the material's `rve_updates` field): which RVEs were stepped, which of those
+    had composed an increment of at least the tolerance since their last update or had
+    waited max_deferred_steps (the rest were stepped because their grains were not at
+    rest), which took more than the tolerance in that one step, and which points are
+    loose (every stress component at most 0.01 of the preparation pressure)."""
+    if args.out.exists():
+        raise SystemExit(f"--out {args.out}: exists (a copy of RUN is made there)")
+    ran = gs.open_result(args.run)
+
+    def as_given(t: dict) -> None:  # a dem material's density is its packings'
+        for m in t["materials"].values():
+            if m.get("type") == "dem":
+                m.pop("density", None)
+
+    case = ran.case.edited(as_given)
+    dem = next(m for m in case.materials.values() if m.type == "dem")
+    tol, cap = dem.update_tolerance, dem.max_deferred_steps
+    if tol <= 0:
+        raise SystemExit(f"{args.run}: update_tolerance = {tol}: no sleeping RVEs")
+    shutil.copytree(args.run, args.out)
+    last = int(ran.history["step"][-1])
+    case.time.end += 1.0  # the step count ends it
+    loose_scale = 0.01 * case.rve.preparation.pressure
+    seen = {"H": None, "waited": None, "updates": None}
+    rows = []
+
+    def on_step(st) -> None:
+        m = st.materials[0]
+        updates = m.point_fields()["rve_updates"]
+        n = len(updates)
+        if seen["H"] is None:  # the first call: the state the next step starts from
+            seen.update(H=np.zeros((n, 3, 3)), waited=np.zeros(n, np.int64), updates=updates)
+            return
+        dH = st.dH
+        H = dH + seen["H"] + np.einsum("pab,pbc->pac", dH, seen["H"])
+        stepped = updates > seen["updates"]
+        by_increment = np.abs(H).max(axis=(1, 2)) >= tol
+        by_cap = seen["waited"] + 1 >= cap
+        sigma = st.points.stress
+        rows.append({"stepped": stepped.mean(),
+                     "stepped_by_increment": (stepped & by_increment).mean(),
+                     "stepped_by_cap": (stepped & by_cap & ~by_increment).mean(),
+                     "stepped_not_at_rest": (stepped & ~by_increment & ~by_cap).mean(),
+                     "one_step_above_tolerance": (np.abs(dH).max(axis=(1, 2)) >= tol).mean(),
+                     "loose": (np.abs(sigma).max(axis=(1, 2)) <= loose_scale).mean(),
+                     "increment_median": float(np.median(np.abs(dH).max(axis=(1, 2)))),
+                     "increment_p90": float(np.quantile(np.abs(dH).max(axis=(1, 2)), 0.9))})
+        seen["H"] = np.where(stepped[:, None, None], 0.0, H)
+        seen["waited"] = np.where(stepped, 0, seen["waited"] + 1)
+        seen["updates"] = updates
+
+    gs.run(case, args.out, resume=True, allow_changed=["time.end"],
+           max_steps=last + args.steps, progress=False, on_step=on_step)
+    out = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
+    out.update(run=str(args.run), from_step=last, steps=len(rows), tolerance=tol,
+               t_over_tc=float(gs.open_result(args.out).history["t_over_tc"][-1]))
+    print(json.dumps(out))
+
+
 def compare(args) -> None:
     rows = []
     for r in args.runs:
@@ -127,8 +192,12 @@ def main() -> None:
     c = sub.add_parser("compare")
     c.add_argument("runs", type=Path, nargs="+")
     c.add_argument("--after", type=float, default=3.0, help="t/tau_c of the late window")
+    w = sub.add_parser("why")
+    w.add_argument("run", type=Path, help="a finished run of `run` with a tolerance")
+    w.add_argument("--out", type=Path, required=True, help="its copy, continued")
+    w.add_argument("--steps", type=int, default=100)
     args = ap.parse_args()
-    run(args) if args.cmd == "run" else compare(args)
+    {"run": run, "compare": compare, "why": why}[args.cmd](args)
 
 
 if __name__ == "__main__":
