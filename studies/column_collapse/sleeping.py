@@ -111,7 +111,8 @@ def why(args) -> None:
     had composed an increment of at least the tolerance since their last update or had
     waited max_deferred_steps (the rest were stepped because their grains were not at
     rest), which took more than the tolerance in that one step, and which points are
-    loose (every stress component at most 0.01 of the preparation pressure)."""
+    loose (every stress component at most 0.01 of the preparation pressure). The first
+    continued step only gives the counters the others start from: `steps` - 1 are measured."""
     if args.out.exists():
         raise SystemExit(f"--out {args.out}: exists (a copy of RUN is made there)")
     ran = gs.open_result(args.run)
