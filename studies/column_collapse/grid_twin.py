@@ -4,7 +4,7 @@ its RVE's own measured mu(I), on the case's cells and on finer ones, with each t
     python studies/column_collapse/grid_twin.py --out DIR
         [--case examples/column_collapse/representative.toml] [--cells 10 5 2.5]
         [--velocity-update aflip apic] [--pressures 200 800]
-        [--inertial 0.01 0.03 0.1 0.2 0.4 0.8] [--multiscale RUN ...]
+        [--inertial 0.01 0.03 0.1 0.2 0.4 0.8] [--multiscale RUN ... [--labels NAME ...]]
 
 (a) The case's RVE's mu(I) as cross_scale.py measures it (grainscale.rve.flow on the
     case's [rve], DIR/flow.csv, flow.png, flow.mu_i.toml; reused where DIR holds it).
@@ -33,6 +33,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import NullFormatter  # noqa: E402
 
 import grainscale as gs  # noqa: E402
 
@@ -93,16 +94,21 @@ def row(run: Path) -> dict:
 
 def plot(rows: list[dict], histories: dict, png: Path) -> None:
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.4))
-    colours = {"aflip": "tab:red", "apic": "tab:blue", "multiscale": "k"}
+    colours = {"aflip": "tab:red", "apic": "tab:blue"}
+    dark = {"aflip": "darkred", "apic": "navy"}  # the multiscale runs
     cells = sorted({r["cell_mm"] for r in rows if r["kind"] == "continuum"}, reverse=True)
     styles = dict(zip(cells, ("-", "--", ":", "-."), strict=False))
+    runs_of = {"aflip": 0, "apic": 0}
     for r in rows:
         h = histories[r["label"]]
         after = h["t_over_tc"] >= 0
-        ls = styles.get(r["cell_mm"], "-") if r["kind"] == "continuum" else "-"
-        lw = 2.2 if r["kind"] == "multiscale" else 1.2
-        ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], ls, lw=lw,
-                color=colours[r["transfer"] if r["kind"] == "continuum" else "multiscale"],
+        if r["kind"] == "continuum":
+            ls, lw, colour = styles.get(r["cell_mm"], "-"), 1.2, colours[r["transfer"]]
+        else:  # thick, one style per multiscale run of a transfer
+            ls = ("-", "--", "-.", ":")[runs_of[r["transfer"]] % 4]
+            runs_of[r["transfer"]] += 1
+            lw, colour = 2.4, dark[r["transfer"]]
+        ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], ls, lw=lw, color=colour,
                 label=r["label"])
     experiment_bands(ax)
     ax.set(xlabel="t / tau_c", ylabel="(L - L_i) / L_i", xlim=(0, 7))
@@ -113,14 +119,18 @@ def plot(rows: list[dict], histories: dict, png: Path) -> None:
         if not rs:
             continue
         mm = [r["cell_mm"] for r in rs]
-        for key, marker in (("runout", "o"), ("runout_mass99", "s"), ("runout_mass95", "^")):
+        for key, marker, what in (("runout", "o", "front"), ("runout_mass99", "s", "99 %"),
+                                  ("runout_mass95", "^", "95 % of the mass")):
             bx.plot(mm, [r[key] for r in rs], marker=marker, color=colours[transfer],
-                    label=f"{transfer}: {key.replace('runout_', '').replace('mass', '% ')}")
+                    label=f"continuum, {transfer}: {what}")
     bx.set(xscale="log", xlabel="cell size [mm]", ylabel="final runout ratio")
     bx.set_xticks(cells, [f"{c:g}" for c in cells])
-    for b in (ax, bx):
-        b.grid(alpha=0.3)
-        b.legend(fontsize=7)
+    bx.xaxis.set_minor_formatter(NullFormatter())
+    bx.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    bx.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    bx.legend(fontsize=7, ncol=2, loc="lower center")
     fig.suptitle("column collapse a = 0.6: the continuum with the RVE's mu(I) on finer grids")
     fig.tight_layout()
     fig.savefig(png, dpi=120)
@@ -142,6 +152,8 @@ def main() -> None:
                     help="inertial numbers of the flow measurement")
     ap.add_argument("--multiscale", type=Path, nargs="*", default=[],
                     help="finished runs of the case on its own grid")
+    ap.add_argument("--labels", nargs="*", default=None,
+                    help="one name per --multiscale run (default: its folder's)")
     args = ap.parse_args()
     if not args.case.is_file():
         raise SystemExit(f"--case {args.case}: no such file")
@@ -160,10 +172,13 @@ def main() -> None:
             rows.append({"kind": "continuum", "transfer": transfer, "cell_mm": mm,
                          "label": label, "wall_s": round(wall, 1), **row(out / "run")})
             histories[label] = gs.open_result(out / "run").history
-    for run in args.multiscale:
+    names = args.labels if args.labels is not None else [r.name for r in args.multiscale]
+    if len(names) != len(args.multiscale):
+        raise SystemExit(f"--labels: {len(names)} names for {len(args.multiscale)} runs")
+    for run, name in zip(args.multiscale, names, strict=True):
         result = gs.open_result(run)
         mm = result.case.grid.cell_size * 1e3
-        label = f"multiscale {run.name}, {result.case.solver.velocity_update}, {mm:g} mm"
+        label = f"multiscale {name}, {result.case.solver.velocity_update}, {mm:g} mm"
         rows.append({"kind": "multiscale", "transfer": result.case.solver.velocity_update,
                      "cell_mm": mm, "label": label, **row(run)})
         histories[label] = result.history
