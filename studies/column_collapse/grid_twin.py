@@ -71,14 +71,20 @@ def on_cells(case: gs.Case, h: float) -> gs.Case:
     return case.edited(tables)
 
 
-def twin(case_path: Path, material: dict, h: float, transfer: str) -> gs.Case:
-    """(b): the continuum twin of the case on cells of h metres with `transfer`."""
+def with_transfer(case_path: Path, transfer: str) -> gs.Case:
+    """The case with `transfer`: its own, or APIC substituted."""
     case = gs.load_case(case_path)
     if transfer == "apic":
         with_apic(case)
     elif transfer != case.solver.velocity_update:
         raise SystemExit(f"--velocity-update {transfer}: the case has "
                          f"{case.solver.velocity_update!r}; only 'apic' is substituted")
+    return case
+
+
+def twin(case_path: Path, material: dict, h: float, transfer: str) -> gs.Case:
+    """(b): the continuum twin of the case on cells of h metres with `transfer`."""
+    case = with_transfer(case_path, transfer)
     title = f"column collapse, mu(I) of {case_path.name}'s RVE, {h * 1e3:g} mm, {transfer}"
     return on_cells(case.continuum_twin(material, title), h)
 
@@ -95,19 +101,19 @@ def row(run: Path) -> dict:
 def plot(rows: list[dict], histories: dict, png: Path) -> None:
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.4))
     colours = {"aflip": "tab:red", "apic": "tab:blue"}
-    dark = {"aflip": "darkred", "apic": "navy"}  # the multiscale runs
+    dark = {"aflip": "darkred", "apic": "navy"}  # the multiscale runs (others: black)
     cells = sorted({r["cell_mm"] for r in rows if r["kind"] == "continuum"}, reverse=True)
     styles = dict(zip(cells, ("-", "--", ":", "-."), strict=False))
-    runs_of = {"aflip": 0, "apic": 0}
+    runs_of: dict[str, int] = {}
     for r in rows:
         h = histories[r["label"]]
         after = h["t_over_tc"] >= 0
         if r["kind"] == "continuum":
             ls, lw, colour = styles.get(r["cell_mm"], "-"), 1.2, colours[r["transfer"]]
         else:  # thick, one style per multiscale run of a transfer
-            ls = ("-", "--", "-.", ":")[runs_of[r["transfer"]] % 4]
-            runs_of[r["transfer"]] += 1
-            lw, colour = 2.4, dark[r["transfer"]]
+            k = runs_of[r["transfer"]] = runs_of.get(r["transfer"], -1) + 1
+            ls = ("-", "--", "-.", ":")[k % 4]
+            lw, colour = 2.4, dark.get(r["transfer"], "k")
         ax.plot(h["t_over_tc"][after], h["runout_ratio"][after], ls, lw=lw, color=colour,
                 label=r["label"])
     experiment_bands(ax)
@@ -157,8 +163,15 @@ def main() -> None:
     args = ap.parse_args()
     if not args.case.is_file():
         raise SystemExit(f"--case {args.case}: no such file")
-    for mm in args.cells:  # every grid checked before the first run
-        on_cells(gs.load_case(args.case), mm * 1e-3)
+    for mm in args.cells:  # every grid, transfer and run checked before the first run
+        for transfer in args.velocity_update:
+            on_cells(with_transfer(args.case, transfer), mm * 1e-3)
+    names = args.labels if args.labels is not None else [r.name for r in args.multiscale]
+    if len(names) != len(args.multiscale):
+        raise SystemExit(f"--labels: {len(names)} names for {len(args.multiscale)} runs")
+    for run in args.multiscale:
+        if not (run / "history.csv").is_file():
+            raise SystemExit(f"--multiscale {run}: no history.csv")
     args.out.mkdir(parents=True, exist_ok=True)
     material = measure_flow(args.case, args.out, 1, args.pressures, args.inertial)
     print(f"mu(I) of the RVE: mu_s {material['mu_s']}, mu_2 {material['mu_2']}, "
@@ -172,9 +185,6 @@ def main() -> None:
             rows.append({"kind": "continuum", "transfer": transfer, "cell_mm": mm,
                          "label": label, "wall_s": round(wall, 1), **row(out / "run")})
             histories[label] = gs.open_result(out / "run").history
-    names = args.labels if args.labels is not None else [r.name for r in args.multiscale]
-    if len(names) != len(args.multiscale):
-        raise SystemExit(f"--labels: {len(names)} names for {len(args.multiscale)} runs")
     for run, name in zip(args.multiscale, names, strict=True):
         result = gs.open_result(run)
         mm = result.case.grid.cell_size * 1e3
@@ -195,8 +205,8 @@ def main() -> None:
         by = {r["cell_mm"]: r for r in rows
               if r["kind"] == "continuum" and r["transfer"] == transfer}
         for mm in sorted(args.cells, reverse=True)[1:]:
-            change[f"{transfer}_{coarse:g}_to_{mm:g}mm"] = {
-                k: round(by[mm][k] / by[coarse][k] - 1.0, 4)
+            change[f"{transfer}_{coarse:g}mm_against_{mm:g}mm"] = {  # what the coarse costs
+                k: round(by[coarse][k] / by[mm][k] - 1.0, 4)
                 for k in ("runout", "runout_mass99", "runout_mass95")}
     (args.out / "results.json").write_text(json.dumps({"material": material, "rows": rows,
                                                        "change": change}, indent=1))

@@ -115,6 +115,9 @@ def why(args) -> None:
     continued step only gives the counters the others start from: `steps` - 1 are measured."""
     if args.out.exists():
         raise SystemExit(f"--out {args.out}: exists (a copy of RUN is made there)")
+    if args.steps < 2:
+        raise SystemExit(f"--steps {args.steps}: at least 2 (the first gives the state "
+                         "the others start from)")
     ran = gs.open_result(args.run)
 
     def as_given(t: dict) -> None:  # a dem material's density is its packings'
@@ -131,33 +134,34 @@ def why(args) -> None:
     last = int(ran.history["step"][-1])
     case.time.end += 1.0  # the step count ends it
     loose_scale = 0.01 * case.rve.preparation.pressure
-    seen = {"H": None, "waited": None, "updates": None}
+    seen = {}
     rows = []
 
     def on_step(st) -> None:
         m = st.materials[0]
+        if len(st.dH) != m.n_points:
+            raise SystemExit(f"{args.run}: {len(st.dH)} points, {m.n_points} in its first "
+                             "material: `why` reads runs of one material")
         updates = m.point_fields()["rve_updates"]
-        n = len(updates)
-        if seen["H"] is None:  # the first call: the state the next step starts from
-            seen.update(H=np.zeros((n, 3, 3)), waited=np.zeros(n, np.int64), updates=updates)
-            return
-        dH = st.dH
-        H = dH + seen["H"] + np.einsum("pab,pbc->pac", dH, seen["H"])
-        stepped = updates > seen["updates"]
-        by_increment = np.abs(H).max(axis=(1, 2)) >= tol
-        by_cap = seen["waited"] + 1 >= cap
-        sigma = st.points.stress
-        rows.append({"stepped": stepped.mean(),
-                     "stepped_by_increment": (stepped & by_increment).mean(),
-                     "stepped_by_cap": (stepped & by_cap & ~by_increment).mean(),
-                     "stepped_not_at_rest": (stepped & ~by_increment & ~by_cap).mean(),
-                     "one_step_above_tolerance": (np.abs(dH).max(axis=(1, 2)) >= tol).mean(),
-                     "loose": (np.abs(sigma).max(axis=(1, 2)) <= loose_scale).mean(),
-                     "increment_median": float(np.median(np.abs(dH).max(axis=(1, 2)))),
-                     "increment_p90": float(np.quantile(np.abs(dH).max(axis=(1, 2)), 0.9))})
-        seen["H"] = np.where(stepped[:, None, None], 0.0, H)
-        seen["waited"] = np.where(stepped, 0, seen["waited"] + 1)
-        seen["updates"] = updates
+        if seen:  # the step just taken, judged from the state it started from
+            dH = st.dH
+            H = dH + seen["H"] + np.einsum("pab,pbc->pac", dH, seen["H"])
+            stepped = updates > seen["updates"]
+            by_increment = np.abs(H).max(axis=(1, 2)) >= tol
+            by_cap = seen["waited"] + 1 >= cap
+            size = np.abs(dH).max(axis=(1, 2))
+            sigma = st.points.stress
+            rows.append({"stepped": stepped.mean(),
+                         "stepped_by_increment": (stepped & by_increment).mean(),
+                         "stepped_by_cap": (stepped & by_cap & ~by_increment).mean(),
+                         "stepped_not_at_rest": (stepped & ~by_increment & ~by_cap).mean(),
+                         "one_step_above_tolerance": (size >= tol).mean(),
+                         "loose": (np.abs(sigma).max(axis=(1, 2)) <= loose_scale).mean(),
+                         "increment_median": float(np.median(size)),
+                         "increment_p90": float(np.quantile(size, 0.9))})
+        # what the solver carries into the next step: each RVE's composed increment since
+        # its last update and the steps it has waited (restored from the checkpoint too)
+        seen.update(H=m.H_acc.copy(), waited=m.deferred.copy(), updates=updates)
 
     gs.run(case, args.out, resume=True, allow_changed=["time.end"],
            max_steps=last + args.steps, progress=False, on_step=on_step)
