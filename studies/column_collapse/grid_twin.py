@@ -32,7 +32,6 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 from matplotlib.ticker import NullFormatter  # noqa: E402
 
 import grainscale as gs  # noqa: E402
@@ -41,6 +40,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 from convergence import experiment_bands, mass_runouts, measures  # noqa: E402
 from cross_scale import measure_flow  # noqa: E402
+from measurement import runout_at  # noqa: E402
 from sleeping import with_apic  # noqa: E402
 from variants import run_variant  # noqa: E402
 
@@ -92,10 +92,7 @@ def twin(case_path: Path, material: dict, h: float, transfer: str) -> gs.Case:
 def row(run: Path) -> dict:
     """The final measures of a column run and its runout at whole tau_c."""
     h = gs.open_result(run).history
-    after = h["t_over_tc"] >= 0
-    at = np.interp(TAU_C, h["t_over_tc"][after], h["runout_ratio"][after])
-    return {**measures(h), **mass_runouts(run),
-            "runout_at_tau_c": {str(k): round(float(v), 4) for k, v in zip(TAU_C, at, strict=True)}}
+    return {**measures(h), **mass_runouts(run), "runout_at_tau_c": runout_at(h, TAU_C)}
 
 
 def plot(rows: list[dict], histories: dict, png: Path) -> None:
@@ -198,7 +195,7 @@ def main() -> None:
         print(f"{r['label']:46s} {r['runout']:6.3f} {r['runout_mass99']:6.3f} "
               f"{r['runout_mass95']:6.3f} {r['height_ratio']:7.3f} "
               f"{r['kinetic_energy_end_over_peak']:7.4f}  "
-              + " ".join(f"{v:.3f}" for v in r["runout_at_tau_c"].values()))
+              + " ".join("-" if v is None else f"{v:.3f}" for v in r["runout_at_tau_c"].values()))
     coarse = max(args.cells)
     change = {}
     for transfer in args.velocity_update:
