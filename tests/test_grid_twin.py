@@ -43,3 +43,43 @@ def test_the_twin_carries_the_law_and_the_transfer():
 def test_a_cell_that_does_not_divide_the_grid_is_refused():
     with pytest.raises(SystemExit, match="--cells 3"):
         twin.on_cells(gs.load_case(CASES / "quick.toml"), 0.003)
+
+
+def test_one_layer_of_points_is_the_same_planar_flow(tmp_path, monkeypatch):
+    """sleeping.py --one-layer halves the column's RVEs by leaving one point layer between
+    the side walls. In a continuum (no RVE to sample) that is the same planar flow: with
+    v_y held at both node planes, each node plane gets mass and force in the same
+    proportion (its weight S_y) and so the same acceleration. Exactly so only without the
+    node-mass cut-offs (mpm/step.py MASS_TOL, LIGHT_MASS_TOL: fractions of the heaviest
+    point's mass), which a one-layer column's far node plane, a third of the near one's
+    mass, crosses at other moments at the free surface: with them the fronts differ by
+    2.6e-6 L_i after one tau_c (1e-4 of a point spacing), without them by 5e-12, the
+    fixed-point nodal sums' resolution (a cfl changed by 1e-12 moves them 1e-13). So the
+    cut-offs are set to 0 here and the tolerance is round-off: 1e-9 fails on any
+    difference in the kinematics."""
+    sleeping = load_example("column_collapse/sleeping.py")
+    import grainscale.mpm.step as step
+    monkeypatch.setattr(step, "MASS_TOL", 0.0)
+    monkeypatch.setattr(step, "LIGHT_MASS_TOL", 0.0)
+
+    def short(t: dict) -> None:
+        t["time"]["end"] = 0.05  # s, 0.64 tau_c after release
+        t["output"]["interval"] = 0.01
+
+    two = twin.twin(CASES / "quick.toml", LAW, 0.01, "aflip").edited(short)
+    one = sleeping.with_one_layer(two)
+    assert one.bodies[0].hi[1] == pytest.approx(0.005)
+    h2, h1 = (gs.run(c, tmp_path / name, progress=False).history
+              for c, name in ((two, "two"), (one, "one")))
+    assert h1["runout_ratio"][-1] > 0.05  # the front has moved 5 mm
+    for key in ("runout_ratio", "height_ratio"):
+        assert abs(h1[key] - h2[key]).max() < 1e-9, key
+    # the one-layer column carries half the mass, so half the kinetic energy
+    assert h1["kinetic_energy"] == pytest.approx(h2["kinetic_energy"] / 2, rel=1e-9, abs=1e-15)
+
+
+def test_one_layer_refuses_a_slice_thicker_than_a_cell():
+    sleeping = load_example("column_collapse/sleeping.py")
+    with pytest.raises(SystemExit, match="--one-layer: a body's y extent"):
+        sleeping.with_one_layer(twin.on_cells(gs.load_case(CASES / "quick.toml"), 0.005)
+                                .edited(lambda t: t["bodies"][0]["hi"].__setitem__(1, 0.01)))
