@@ -80,6 +80,6 @@ def test_one_layer_of_points_is_the_same_planar_flow(tmp_path, monkeypatch):
 
 def test_one_layer_refuses_a_slice_thicker_than_a_cell():
     sleeping = load_example("column_collapse/sleeping.py")
-    with pytest.raises(SystemExit, match="--one-layer: a body's y extent"):
+    with pytest.raises(SystemExit, match="--one-layer: a body must be a box one cell"):
         sleeping.with_one_layer(twin.on_cells(gs.load_case(CASES / "quick.toml"), 0.005)
                                 .edited(lambda t: t["bodies"][0]["hi"].__setitem__(1, 0.01)))
