@@ -63,7 +63,8 @@ def test_one_layer_of_points_is_the_same_planar_flow(tmp_path, monkeypatch):
     monkeypatch.setattr(step, "LIGHT_MASS_TOL", 0.0)
 
     def short(t: dict) -> None:
-        t["time"]["end"] = 0.05  # s, 0.64 tau_c after release
+        t["time"]["start"] = -0.01  # s, a third of the geostatic stage: settling enough
+        t["time"]["end"] = 0.04  # s, 0.5 tau_c after release
         t["output"]["interval"] = 0.01
 
     two = twin.twin(CASES / "quick.toml", LAW, 0.01, "aflip").edited(short)
@@ -71,7 +72,7 @@ def test_one_layer_of_points_is_the_same_planar_flow(tmp_path, monkeypatch):
     assert one.bodies[0].hi[1] == pytest.approx(0.005)
     h2, h1 = (gs.run(c, tmp_path / name, progress=False).history
               for c, name in ((two, "two"), (one, "one")))
-    assert h1["runout_ratio"][-1] > 0.05  # the front has moved 5 mm
+    assert h1["runout_ratio"][-1] > 0.03  # the front has moved 3 mm
     for key in ("runout_ratio", "height_ratio"):
         assert abs(h1[key] - h2[key]).max() < 1e-9, key
     # the one-layer column carries half the mass, so half the kinetic energy
