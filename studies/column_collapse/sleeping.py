@@ -2,7 +2,7 @@
 
     python studies/column_collapse/sleeping.py run --out DIR [--tolerance 1e-6]
         [--max-deferred 20] [--cfl-offset 0] [--threads N] [--case quick.toml]
-        [--velocity-update apic] [--particles N] [--one-layer]
+        [--velocity-update apic] [--particles N] [--one-layer] [--rve-seed N]
     python studies/column_collapse/sleeping.py compare RUN [RUN ...] [--after 3]
     python studies/column_collapse/sleeping.py why RUN --out COPY [--steps 100]
 
@@ -13,7 +13,9 @@ its history, cfl times (1 + --cfl-offset) (a round-off realisation: 1e-9 and -1e
 the realisations of §2.3), with APIC where --velocity-update apic, RVEs of --particles
 spheres where given, with --one-layer the slice one point thick (half the RVEs: the
 bodies end half a cell above their base in y, one layer of points between the side walls
-at the nodes y = 0 and one cell, which hold every point's v_y at 0), into DIR; resumed from
+at the nodes y = 0 and one cell, which hold every point's v_y at 0), with --rve-seed the
+RVE packings generated from another seed ([rve] seed: a packing realisation, where the
+cfl offset leaves the packings as they are), into DIR; resumed from
 DIR's newest checkpoint where it holds one. `compare`: per run,
 studies/column_spread.py's measures at the last row (front, 99 % and 95 % of the mass,
 H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
@@ -89,8 +91,11 @@ def with_one_layer(c: gs.Case) -> gs.Case:
 
 def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: float,
                   velocity_update: str | None = None, particles: int | None = None,
-                  one_layer: bool = False) -> gs.Case:
+                  one_layer: bool = False, rve_seed: int | None = None) -> gs.Case:
     c = gs.load_case(case)
+    if rve_seed is not None:
+        c.rve.seed = rve_seed
+        c.title += f", packings of seed {rve_seed}"
     if one_layer:
         c = with_one_layer(c)
     if particles is not None:  # RVEs of another size, generated at it
@@ -114,7 +119,8 @@ def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: f
 
 def run(args) -> None:
     case = sleeping_case(args.case, args.tolerance, args.max_deferred, args.cfl_offset,
-                         args.velocity_update, args.particles, args.one_layer).check()
+                         args.velocity_update, args.particles, args.one_layer,
+                         args.rve_seed).check()
     resume = any((args.out / n).is_file() for n in ("checkpoint.h5", "checkpoint.prev.h5"))
     gs.run(case, args.out, resume=resume, threads=args.threads)
 
@@ -232,6 +238,8 @@ def main() -> None:
                    help="the case's RVEs at this size ([rve] particles), generated at it")
     r.add_argument("--one-layer", action="store_true",
                    help="the slice one point thick instead of the case's one cell")
+    r.add_argument("--rve-seed", type=int,
+                   help="[rve] seed: the packings of another seed (a packing realisation)")
     r.add_argument("--threads", type=int)
     c = sub.add_parser("compare")
     c.add_argument("runs", type=Path, nargs="+")
