@@ -223,9 +223,11 @@ def test_triaxial_800_hertz_mindlin_against_yade():
     within 5 %, the residual (mean over the last 5 % of strain) within 10 % and eps_v
     within 0.01 at 10 and 20 % (the issue's bands; measured 2.5 %, 1.1 %, 0.0005 and
     0.0075). One realisation each, from rest. Stiff grains (stiffness number ~5000) reach
-    q/p 0.94 within 0.2 % strain and slip events part the two runs from 0.6 % on, so the
-    row-by-row agreement is checked on the first two rows only (measured 3e-3 in q/p,
-    1e-5 in eps_v): a law off by its 2/3 or E for E* moves them by > 0.02 and 1e-4."""
+    q/p 0.94 within 0.2 % strain and slip events part the two runs soon after: from 0.6 %
+    on on one machine, from 0.4 % on another (its CPU's round-off: q/p 7e-3 from YADE's
+    there), so the row-by-row agreement is checked on the first row only (0.2 %; measured
+    3e-3 in q/p on both machines, 1e-5 in eps_v): a law off by its 2/3 or E for E* moves
+    it by > 0.02 and 1e-4."""
     path = Path(__file__).resolve().parents[2] / "examples" / "rve" / "hertz_mindlin.toml"
     case = load_rve_case(path)
     h, centres, radii = read_packing(DATA.parent / "triaxial_800_hertz" / "packing.txt")
@@ -235,8 +237,8 @@ def test_triaxial_800_hertz_mindlin_against_yade():
                      skiprows=1)[1:]
     assert len(ref) == len(a)
     np.testing.assert_allclose(a, ref[:, 0], rtol=0, atol=1e-5)  # the same time step
-    np.testing.assert_allclose(qp[:2], ref[:2, 1], rtol=0, atol=5e-3)
-    np.testing.assert_allclose(ev[:2], ref[:2, 2], rtol=0, atol=3e-5)
+    np.testing.assert_allclose(qp[:1], ref[:1, 1], rtol=0, atol=5e-3)
+    np.testing.assert_allclose(ev[:1], ref[:1, 2], rtol=0, atol=3e-5)
     check_bands(a, qp, ev, ref)
 
 
