@@ -19,6 +19,8 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import os
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -48,7 +50,9 @@ os.environ.setdefault("GRAINSCALE_PACKING_STORE", str(_TMP / "grainscale-test-pa
 def pytest_collection_modifyitems(session, config, items):
     """tests/dem/test_cuda_kernel.py's simulator runs start now, in the background, and
     its tests move to the end of the session: the simulator is single-threaded Python
-    (minutes), so it overlaps the other tests instead of adding to them."""
+    (minutes), so it overlaps the other tests instead of adding to them. So does the
+    compilation of the kernel variants that later tests need (_compile_ahead)."""
+    _compile_ahead(items)
     cuda = [it for it in items if hasattr(getattr(it, "module", None), "start_simulator_ahead")]
     if not cuda:
         return
@@ -60,7 +64,23 @@ def pytest_collection_modifyitems(session, config, items):
     cuda[0].module.start_simulator_ahead(wanted)
 
 
+_AHEAD: list[subprocess.Popen] = []
+
+
+def _compile_ahead(items) -> None:
+    """The kernel variants that the selected tests' modules name in COMPILE_AHEAD are
+    compiled by tests/warm_kernels.py in the background (its docstring)."""
+    wanted = sorted({v for it in items
+                     for v in getattr(getattr(it, "module", None), "COMPILE_AHEAD", ())})
+    if wanted:
+        _AHEAD.append(subprocess.Popen([sys.executable, str(Path(__file__).with_name(
+            "warm_kernels.py")), *wanted], stdout=subprocess.DEVNULL))
+
+
 def pytest_sessionfinish(session, exitstatus):
+    for proc in _AHEAD:
+        proc.kill()
+        proc.wait()
     for it in getattr(session, "items", []):
         stop = getattr(getattr(it, "module", None), "stop_simulator_ahead", None)
         if stop is not None:

@@ -13,6 +13,8 @@ from grainscale.dem import engine, hertz
 from grainscale.dem.state import from_packing
 from grainscale.io.rve_vtk import contact_list
 
+COMPILE_AHEAD = ("hertz",)  # tests/warm_kernels.py compiles its kernel variant early
+
 DENSITY = 2500.0
 YOUNG = 70e9  # glass
 NU = 0.22
