@@ -46,35 +46,30 @@ os.environ.setdefault("NUMBA_CACHE_DIR", str(_TMP / "grainscale-numba-cache" / _
 os.environ.setdefault("GRAINSCALE_PACKING_STORE", str(_TMP / "grainscale-test-packings" / _HASH))
 
 
+_AHEAD: list[subprocess.Popen] = []
+
+
 @pytest.hookimpl(trylast=True)  # after -m and -k have deselected
 def pytest_collection_modifyitems(session, config, items):
-    """tests/dem/test_cuda_kernel.py's simulator runs start now, in the background, and
-    its tests move to the end of the session: the simulator is single-threaded Python
-    (minutes), so it overlaps the other tests instead of adding to them. So does the
-    compilation of the kernel variants that later tests need (_compile_ahead)."""
-    _compile_ahead(items)
+    """Work that later tests need starts now, in one process in the background, on the
+    machine's other core: the DEM kernels the selected modules name in COMPILE_AHEAD
+    are compiled (tests/warm_kernels.py), then tests/dem/test_cuda_kernel.py's
+    simulator runs start (single-threaded Python, minutes; they need those kernels too).
+    tests/mpm, which needs none of them, runs first; test_cuda_kernel's tests run last."""
+    compile_first = sorted({v for it in items
+                            for v in getattr(getattr(it, "module", None), "COMPILE_AHEAD", ())})
+    items.sort(key=lambda it: it.path.parent.name != "mpm")  # stable: the rest keep their order
     cuda = [it for it in items if hasattr(getattr(it, "module", None), "start_simulator_ahead")]
-    if not cuda:
-        return
     wanted = {name for it in cuda for name in cuda[0].module.FIXTURE_PARTS
               if name in it.fixturenames
               and getattr(it, "callspec", None) is not None
               and it.callspec.params.get(name) == "simulator"}
     items[:] = [it for it in items if it not in cuda] + cuda
-    cuda[0].module.start_simulator_ahead(wanted)
-
-
-_AHEAD: list[subprocess.Popen] = []
-
-
-def _compile_ahead(items) -> None:
-    """The kernel variants that the selected tests' modules name in COMPILE_AHEAD are
-    compiled by tests/warm_kernels.py in the background (its docstring)."""
-    wanted = sorted({v for it in items
-                     for v in getattr(getattr(it, "module", None), "COMPILE_AHEAD", ())})
     if wanted:
+        cuda[0].module.start_simulator_ahead(wanted, compile_first)
+    elif compile_first:
         _AHEAD.append(subprocess.Popen([sys.executable, str(Path(__file__).with_name(
-            "warm_kernels.py")), *wanted], stdout=subprocess.DEVNULL))
+            "warm_kernels.py")), *compile_first], stdout=subprocess.DEVNULL))
 
 
 def pytest_sessionfinish(session, exitstatus):

@@ -14,6 +14,8 @@ from grainscale.coupling.rve_material import RVEMaterial
 from grainscale.dem import homogenise
 from grainscale.dem.generate import generate
 
+COMPILE_AHEAD = ("rve",)  # tests/warm_kernels.py compiles the DEM kernels while tests/mpm runs
+
 
 @pytest.fixture(scope="module")
 def packing():

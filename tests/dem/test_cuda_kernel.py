@@ -77,21 +77,25 @@ FIXTURE_PARTS = {"sim": ("kernel",), "sim_long": ("kernel_more", "coupled")}
 _AHEAD: dict[tuple[str, ...], subprocess.Popen] = {}
 
 
-def _start(parts: tuple[str, ...], simulator: bool) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, str(HERE / "cuda_sim_cases.py"), *parts],
+def _start(parts: tuple[str, ...], simulator: bool, compile_first=()) -> subprocess.Popen:
+    first = [f"--compile-first={','.join(compile_first)}"] if compile_first else []
+    return subprocess.Popen([sys.executable, str(HERE / "cuda_sim_cases.py"), *first, *parts],
                             env=_env(simulator), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=HERE)
 
 
-def start_simulator_ahead(fixtures: set[str]) -> None:
+def start_simulator_ahead(fixtures: set[str], compile_first=()) -> None:
     """Start the simulator's runs of `fixtures` (names in FIXTURE_PARTS) in the
-    background. tests/conftest.py calls this once the session's tests are selected and
-    moves this module's tests last: the simulator is single-threaded Python, so its
-    minutes overlap the other tests instead of adding to them."""
-    for name in fixtures:
+    background, the first of them after compiling tests/warm_kernels.py's
+    `compile_first` kernels, which it needs too. tests/conftest.py calls this once the
+    session's tests are selected and moves this module's tests last: the simulator is
+    single-threaded Python, so its minutes overlap the other tests instead of adding to
+    them."""
+    for name in sorted(fixtures, key=lambda n: n != "sim"):  # the fast tier's first
         parts = FIXTURE_PARTS[name]
         if parts not in _AHEAD:
-            _AHEAD[parts] = _start(parts, simulator=True)
+            _AHEAD[parts] = _start(parts, simulator=True, compile_first=compile_first)
+            compile_first = ()
 
 
 def stop_simulator_ahead() -> None:
