@@ -16,7 +16,9 @@ runout_ratio and height_ratio; VTK frames):
   each 5 mm layer of the initial column the rearmost moving point's initial x; a line
   fitted to those (x, z) from the top down to where the layers stop moving; its angle
   from the horizontal (the experiments' failure plane is seen from the column's upper
-  edge going down and back); None where fewer than 3 layers move;
+  edge going down and back), with its standard error (failure_surface: through few
+  layers one point a spacing (5 mm) off tilts it by degrees); None where fewer than 3
+  layers move;
 - the deposit at the last frame: the height of the highest point centre over 10 mm
   bins of x (one cell of quick.toml's grid; half a cell is a point spacing).
 `--png PREFIX` writes PREFIX_runout.png (runout against t/tau_c with the band) and
@@ -47,9 +49,11 @@ def runout_at(h: dict, times=TIMES) -> dict:
 
 
 def failure_surface(x0: np.ndarray, v: np.ndarray, speed: float, length: float,
-                    height: float) -> dict | None:
+                    height: float, spacing: float) -> dict | None:
     """The boundary between moving and resting points of the initial column (module
-    docstring): its fitted angle [deg] and the layers it spans."""
+    docstring): its fitted angle [deg], the angle's standard error [deg] and the layers
+    it spans. `spacing` [m]: the points' initial spacing along x, to which each layer's
+    boundary is known."""
     inside = (x0[:, 0] <= length) & (x0[:, 2] <= height)
     moving = inside & (np.linalg.norm(v, axis=1) > speed)
     xs, zs = [], []
@@ -61,7 +65,16 @@ def failure_surface(x0: np.ndarray, v: np.ndarray, speed: float, length: float,
     if len(xs) < 3:
         return None
     slope = np.polyfit(xs, zs, 1)[0]  # dz/dx of the boundary
+    # The error is in x (z is each layer's centre): fitted as x(z) = a + b z, b's standard
+    # error is s / sqrt(sum (z - mean z)^2), s^2 the residual variance over n - 2, at least
+    # a uniform error over one spacing (spacing^2 / 12), which a boundary lying exactly on
+    # the points' lattice (a residual of 0) still has. d(atan(1/b))/db = -1 / (1 + b^2).
+    x, z = np.asarray(xs), np.asarray(zs)
+    b, a = np.polyfit(z, x, 1)
+    s2 = max(float(np.sum((x - a - b * z) ** 2)) / (len(x) - 2), spacing ** 2 / 12.0)
+    se_b = math.sqrt(s2 / float(np.sum((z - z.mean()) ** 2)))
     return {"angle_deg": round(math.degrees(math.atan(abs(slope))), 1),
+            "angle_se_deg": round(math.degrees(se_b / (1.0 + b * b)), 1),
             "layers": len(xs), "from_z": round(min(zs), 4), "to_z": round(max(zs), 4),
             "x_at_top": round(xs[int(np.argmax(zs))], 4)}
 
@@ -75,6 +88,7 @@ def measure(run: Path) -> dict:
     h = r.history
     frames = r.frames()
     x0 = frames[0][1].points
+    spacing = r.case.grid.cell_size / r.case.bodies[0].points_per_cell
     out = {"run": str(run), "steps": int(h["step"][-1]),
            "t_over_tc_end": round(float(h["t_over_tc"][-1]), 3),
            "runout": runout_at(h), "final": round(float(h["runout_ratio"][-1]), 3),
@@ -86,7 +100,7 @@ def measure(run: Path) -> dict:
         k = int(np.argmin([abs(t / tau - ts) for t, _ in frames]))
         t, mesh = frames[k]
         s = failure_surface(x0, mesh.point_data["velocity"], 0.1 * math.sqrt(g * height),
-                            length, height)
+                            length, height, spacing)
         out["surface"][f"{ts:g}"] = {"t_over_tc": round(t / tau, 3), **(s or {})}
     last = frames[-1][1]
     edge = last.points[:, 2]
@@ -115,7 +129,8 @@ def main() -> None:
           + ", ".join(f"{t:g}" for t in SURFACE_TIMES) + " tau_c")
     for name, row in zip(labels, rows, strict=True):
         runs = " ".join("-" if v is None else f"{v:.3f}" for v in row["runout"].values())
-        ang = ", ".join(f"{s.get('angle_deg', '-')}" for s in row["surface"].values())
+        ang = ", ".join(f"{s['angle_deg']} +- {s['angle_se_deg']}" if s.get("angle_deg")
+                        is not None else "-" for s in row["surface"].values())
         print(f"{name:>24} {row['final']:6.3f} {row['band']:>6} {row['height_ratio']:7.3f}"
               f"  {runs};  {ang}")
     if args.png:
