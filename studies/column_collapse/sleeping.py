@@ -3,6 +3,7 @@
     python studies/column_collapse/sleeping.py run --out DIR [--tolerance 1e-6]
         [--max-deferred 20] [--cfl-offset 0] [--threads N] [--case quick.toml]
         [--velocity-update apic] [--particles N] [--one-layer] [--rve-seed N]
+        [--points-per-cell N]
     python studies/column_collapse/sleeping.py compare RUN [RUN ...] [--after 3]
     python studies/column_collapse/sleeping.py why RUN --out COPY [--steps 100]
 
@@ -15,7 +16,9 @@ spheres where given, with --one-layer the slice one point thick (half the RVEs: 
 bodies end half a cell above their base in y, one layer of points between the side walls
 at the nodes y = 0 and one cell, which hold every point's v_y at 0), with --rve-seed the
 RVE packings generated from another seed ([rve] seed: a packing realisation, where the
-cfl offset leaves the packings as they are), into DIR; resumed from
+cfl offset leaves the packings as they are), with --points-per-cell N^3 points a cell
+(N = 1: the cell's one point cannot carry a share of its cell's weight apart from the
+others', validation §2.3), into DIR; resumed from
 DIR's newest checkpoint where it holds one. `compare`: per run,
 studies/column_spread.py's measures at the last row (front, 99 % and 95 % of the mass,
 H_f/H_i) and the DEM cost: DEM steps per RVE and MPM step, and the
@@ -91,8 +94,13 @@ def with_one_layer(c: gs.Case) -> gs.Case:
 
 def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: float,
                   velocity_update: str | None = None, particles: int | None = None,
-                  one_layer: bool = False, rve_seed: int | None = None) -> gs.Case:
+                  one_layer: bool = False, rve_seed: int | None = None,
+                  points_per_cell: int | None = None) -> gs.Case:
     c = gs.load_case(case)
+    if points_per_cell is not None:
+        for b in c.bodies:
+            b.points_per_cell = points_per_cell
+        c.title += f", {points_per_cell}^3 points a cell"
     if rve_seed is not None:
         c.rve.seed = rve_seed
         c.title += f", packings of seed {rve_seed}"
@@ -120,7 +128,7 @@ def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: f
 def run(args) -> None:
     case = sleeping_case(args.case, args.tolerance, args.max_deferred, args.cfl_offset,
                          args.velocity_update, args.particles, args.one_layer,
-                         args.rve_seed).check()
+                         args.rve_seed, args.points_per_cell).check()
     resume = any((args.out / n).is_file() for n in ("checkpoint.h5", "checkpoint.prev.h5"))
     gs.run(case, args.out, resume=resume, threads=args.threads)
 
@@ -240,6 +248,8 @@ def main() -> None:
                    help="the slice one point thick instead of the case's one cell")
     r.add_argument("--rve-seed", type=int,
                    help="[rve] seed: the packings of another seed (a packing realisation)")
+    r.add_argument("--points-per-cell", type=int,
+                   help="n of the bodies' n^3 points a cell instead of the case's")
     r.add_argument("--threads", type=int)
     c = sub.add_parser("compare")
     c.add_argument("runs", type=Path, nargs="+")

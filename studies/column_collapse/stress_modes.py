@@ -3,7 +3,7 @@ against the lithostatic stress, and the median stress of each sub-cell position.
 
     python studies/column_collapse/stress_modes.py RUN [--frames 1 -1] [--behind 0.05]
     python studies/column_collapse/stress_modes.py DIR --geostatic {rve,mohr-coulomb}
-        [--shape GIMP|linear] [--library N] [--frames -1]
+        [--shape GIMP|linear] [--library N] [--points-per-cell N] [--frames -1]
 
 For the points initially behind x = --behind (the part of the column that stays at
 rest), per frame: the vertical stress sigma_zz (compression positive) of each 1-cell
@@ -19,7 +19,8 @@ stress) has medians apart by the layer's stress.
 (~2 min on one core) or with a Mohr-Coulomb continuum (phi 22 deg, E = 19 MPa, about
 the RVE's P-wave modulus, nu 0.3, 1500 kg/m3; ~1 min) on the same grid and points, with
 GIMP or linear shape functions (--shape), the RVEs copies of --library packings
-(quick.toml: 2, assigned at random; 1: every point a copy of the same packing).
+(quick.toml: 2, assigned at random; 1: every point a copy of the same packing), with
+--points-per-cell N^3 points a cell (quick.toml: 2).
 """
 
 from __future__ import annotations
@@ -36,12 +37,15 @@ from grainscale.analysis import read_frame
 QUICK = Path(__file__).resolve().parents[2] / "examples" / "column_collapse" / "quick.toml"
 
 
-def geostatic(out: Path, material: str, shape: str, library: int | None = None) -> None:
+def geostatic(out: Path, material: str, shape: str, library: int | None = None,
+              points_per_cell: int | None = None) -> None:
     """quick.toml's geostatic stage with its RVEs (from `library` packings if given) or
     a Mohr-Coulomb continuum (module docstring)."""
     c = gs.load_case(QUICK)
     if library is not None:
         c.materials["sand"].library = library
+    if points_per_cell is not None:
+        c.bodies[0].points_per_cell = points_per_cell
     if material == "mohr-coulomb":
         c.materials = {"sand": {"type": "mohr_coulomb", "density": 1500.0,
                                 "youngs_modulus": 19e6, "poisson_ratio": 0.3,
@@ -67,9 +71,11 @@ def main() -> None:
                     help="shape functions of that run")
     ap.add_argument("--library", type=int, help="packings of that run's RVEs (default "
                     "quick.toml's 2)")
+    ap.add_argument("--points-per-cell", type=int, help="n of that run's n^3 points a cell "
+                    "(default quick.toml's 2)")
     args = ap.parse_args()
     if args.geostatic:
-        geostatic(args.run, args.geostatic, args.shape, args.library)
+        geostatic(args.run, args.geostatic, args.shape, args.library, args.points_per_cell)
     case = gs.open_result(args.run).case
     h = case.grid.cell_size if np.isscalar(case.grid.cell_size) else case.grid.cell_size[0]
     n = next(b.points_per_cell for b in case.bodies)
