@@ -4,15 +4,17 @@ its RVE's own measured mu(I), on the case's cells and on finer ones, with each t
     python studies/column_collapse/grid_twin.py --out DIR
         [--case examples/column_collapse/representative.toml] [--cells 10 5 2.5]
         [--velocity-update aflip apic] [--pressures 200 800]
-        [--inertial 0.01 0.03 0.1 0.2 0.4 0.8] [--multiscale RUN ... [--labels NAME ...]]
+        [--inertial 0.01 0.03 0.1 0.2 0.4 0.8] [--points-per-cell N]
+        [--multiscale RUN ... [--labels NAME ...]]
 
 (a) The case's RVE's mu(I) as cross_scale.py measures it (grainscale.rve.flow on the
     case's [rve], DIR/flow.csv, flow.png, flow.mu_i.toml; reused where DIR holds it).
 (b) The case's continuum twin (Case.continuum_twin with that law) on cells of each size
     in mm: the same extent, n^3 points a cell as the case, the slice one cell thick (as
     fine.toml is quick.toml on 5 mm cells), with the case's own transfer (`aflip`, its
-    relaxation time) and with APIC (`apic`, no relaxation), into DIR/<transfer>_<mm>mm.
-    A run already finished there is not repeated.
+    relaxation time) and with APIC (`apic`, no relaxation), into DIR/<transfer>_<mm>mm
+    (with --points-per-cell N: N^3 points a cell instead of the case's, into
+    DIR/<transfer>_<mm>mm_<N>ppc). A run already finished there is not repeated.
 Where the multiscale case can only be afforded on its own grid, the twin's change from
 that grid to the finer ones is what the reduction costs in a column carrying the same
 grains' law. --multiscale adds finished runs of the case (on its grid) to the table and
@@ -153,6 +155,8 @@ def main() -> None:
     ap.add_argument("--inertial", type=float, nargs="+",
                     default=[0.01, 0.03, 0.1, 0.2, 0.4, 0.8],
                     help="inertial numbers of the flow measurement")
+    ap.add_argument("--points-per-cell", type=int, default=None,
+                    help="n of the twins' n^3 points a cell (default: the case's)")
     ap.add_argument("--multiscale", type=Path, nargs="*", default=[],
                     help="finished runs of the case on its own grid")
     ap.add_argument("--labels", nargs="*", default=None,
@@ -176,9 +180,14 @@ def main() -> None:
     rows, histories = [], {}
     for transfer in args.velocity_update:
         for mm in sorted(args.cells, reverse=True):
-            out = args.out / f"{transfer}_{mm:g}mm"
-            wall = run_variant(twin(args.case, material, mm * 1e-3, transfer), out)
-            label = f"continuum, {transfer}, {mm:g} mm"
+            n = args.points_per_cell
+            case = twin(args.case, material, mm * 1e-3, transfer)
+            if n is not None:
+                for b in case.bodies:
+                    b.points_per_cell = n
+            out = args.out / (f"{transfer}_{mm:g}mm" + (f"_{n}ppc" if n is not None else ""))
+            wall = run_variant(case, out)
+            label = f"continuum, {transfer}, {mm:g} mm" + (f", {n}^3 a cell" if n else "")
             rows.append({"kind": "continuum", "transfer": transfer, "cell_mm": mm,
                          "label": label, "wall_s": round(wall, 1), **row(out / "run")})
             histories[label] = gs.open_result(out / "run").history
