@@ -87,11 +87,14 @@ def test_one_layer_refuses_a_slice_thicker_than_a_cell():
 
 
 def test_points_per_cell_gives_one_point_a_cell():
-    """sleeping.py run --points-per-cell 1: quick.toml's 0.1 x 0.06 m column on 10 mm cells,
-    one cell thick, is 10 x 6 = 60 points (8 times fewer than its 2 x 2 x 2), and `check`
-    warns that one point a cell in a flow is unusual."""
+    """sleeping.py run --points-per-cell 1 and grid_twin.py --points-per-cell 1:
+    quick.toml's 0.1 x 0.06 m column on 10 mm cells, one cell thick, is 10 x 6 = 60
+    points (8 times fewer than its 2 x 2 x 2, the twin's default), and `check` warns
+    that one point a cell in a flow is unusual."""
     sleeping = load_example("column_collapse/sleeping.py")
     report = gs.check(sleeping.sleeping_case(CASES / "quick.toml", 3e-6, 20, 0.0,
                                              points_per_cell=1))
     assert report["points"] == 60
     assert any("points_per_cell = 1" in w for w in report["warnings"])
+    for n, points in ((None, 480), (1, 60)):
+        assert gs.check(twin.twin(CASES / "quick.toml", LAW, 0.01, "aflip", n))["points"] == points

@@ -84,11 +84,17 @@ def with_transfer(case_path: Path, transfer: str) -> gs.Case:
     return case
 
 
-def twin(case_path: Path, material: dict, h: float, transfer: str) -> gs.Case:
-    """(b): the continuum twin of the case on cells of h metres with `transfer`."""
+def twin(case_path: Path, material: dict, h: float, transfer: str,
+         points_per_cell: int | None = None) -> gs.Case:
+    """(b): the continuum twin of the case on cells of h metres with `transfer` (and
+    points_per_cell^3 points a cell where given)."""
     case = with_transfer(case_path, transfer)
     title = f"column collapse, mu(I) of {case_path.name}'s RVE, {h * 1e3:g} mm, {transfer}"
-    return on_cells(case.continuum_twin(material, title), h)
+    case = on_cells(case.continuum_twin(material, title), h)
+    if points_per_cell is not None:
+        for b in case.bodies:
+            b.points_per_cell = points_per_cell
+    return case
 
 
 def row(run: Path) -> dict:
@@ -181,12 +187,8 @@ def main() -> None:
     for transfer in args.velocity_update:
         for mm in sorted(args.cells, reverse=True):
             n = args.points_per_cell
-            case = twin(args.case, material, mm * 1e-3, transfer)
-            if n is not None:
-                for b in case.bodies:
-                    b.points_per_cell = n
             out = args.out / (f"{transfer}_{mm:g}mm" + (f"_{n}ppc" if n is not None else ""))
-            wall = run_variant(case, out)
+            wall = run_variant(twin(args.case, material, mm * 1e-3, transfer, n), out)
             label = f"continuum, {transfer}, {mm:g} mm" + (f", {n}^3 a cell" if n else "")
             rows.append({"kind": "continuum", "transfer": transfer, "cell_mm": mm,
                          "label": label, "wall_s": round(wall, 1), **row(out / "run")})
