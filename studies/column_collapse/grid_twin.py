@@ -43,7 +43,7 @@ sys.path[:0] = [str(HERE), str(HERE.parent)]
 from convergence import experiment_bands, mass_runouts, measures  # noqa: E402
 from cross_scale import measure_flow  # noqa: E402
 from measurement import runout_at  # noqa: E402
-from sleeping import with_apic  # noqa: E402
+from sleeping import with_apic, with_points_per_cell  # noqa: E402
 from variants import run_variant  # noqa: E402
 
 CASES = HERE.parents[1] / "examples" / "column_collapse"
@@ -91,10 +91,7 @@ def twin(case_path: Path, material: dict, h: float, transfer: str,
     case = with_transfer(case_path, transfer)
     title = f"column collapse, mu(I) of {case_path.name}'s RVE, {h * 1e3:g} mm, {transfer}"
     case = on_cells(case.continuum_twin(material, title), h)
-    if points_per_cell is not None:
-        for b in case.bodies:
-            b.points_per_cell = points_per_cell
-    return case
+    return case if points_per_cell is None else with_points_per_cell(case, points_per_cell)
 
 
 def row(run: Path) -> dict:

@@ -30,11 +30,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
 import grainscale as gs
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from convergence import point_spacing  # noqa: E402
 
 BAND = (0.72, 1.08)  # final runout for a = 0.6: Lube et al. 2005, Lajeunesse et al. 2005
 TIMES = (0.5, 1, 2, 3, 4, 5, 6, 7)  # t / tau_c
@@ -88,7 +92,7 @@ def measure(run: Path) -> dict:
     h = r.history
     frames = r.frames()
     x0 = frames[0][1].points
-    spacing = r.case.grid.cell_size / r.case.bodies[0].points_per_cell
+    spacing = point_spacing(r.case)
     out = {"run": str(run), "steps": int(h["step"][-1]),
            "t_over_tc_end": round(float(h["t_over_tc"][-1]), 3),
            "runout": runout_at(h), "final": round(float(h["runout_ratio"][-1]), 3),

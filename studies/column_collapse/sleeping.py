@@ -59,6 +59,13 @@ def with_apic(c: gs.Case) -> gs.Case:
     return c
 
 
+def with_points_per_cell(c: gs.Case, n: int) -> gs.Case:
+    """The case with n^3 points a cell in every body (in place; returned)."""
+    for b in c.bodies:
+        b.points_per_cell = n
+    return c
+
+
 def with_one_layer(c: gs.Case) -> gs.Case:
     """The slice one point thick: each box body, one cell thick in y from a node plane,
     ends one sub-cell above its base, so one layer of points lies between the side walls
@@ -98,8 +105,7 @@ def sleeping_case(case: Path, tolerance: float, max_deferred: int, cfl_offset: f
                   points_per_cell: int | None = None) -> gs.Case:
     c = gs.load_case(case)
     if points_per_cell is not None:
-        for b in c.bodies:
-            b.points_per_cell = points_per_cell
+        with_points_per_cell(c, points_per_cell)
         c.title += f", {points_per_cell}^3 points a cell"
     if rve_seed is not None:
         c.rve.seed = rve_seed
